@@ -1,0 +1,86 @@
+"""The 1-hot encoder of Table 1: each state variable's range is cut into intervals, lower-inclusive
+[a, b), and the interval the value falls in spikes. Several variables are concatenated.
+
+    angle (deg):      [-12,-6) [-6,-1) [-1,0) [0,1) [1,6) [6,12]      6 inputs
+    cart velocity:    (-inf,-e) [-e,e) [e,+inf)                        3 inputs (e = 5 m/s in Table 1)
+
+Only the interior edges matter: a value below the first edge falls in the first interval, one at
+or above the last in the last (the environment fails the trial before the angle leaves +-12 deg).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba.extending import register_jitable
+
+from .params import Params
+
+ANGLE_EDGES_DEG = (-6.0, -1.0, 0.0, 1.0, 6.0)  # Table 1 interior edges
+STATE_NAMES = ("cart_position", "cart_velocity", "pole_angle", "pole_angular_velocity")
+STATE_UNITS = ("m", "m/s", "deg", "deg/s")
+
+
+@dataclass(frozen=True)
+class Encoder:
+    """Which state components are encoded (indices into the 4-vector state) and their interior edges."""
+
+    components: tuple[int, ...]
+    edges: tuple[tuple[float, ...], ...]
+
+    @classmethod
+    def from_params(cls, p: Params) -> "Encoder":
+        if p.nsv == 1:
+            return cls((2,), (ANGLE_EDGES_DEG,))
+        return cls((2, 1), (ANGLE_EDGES_DEG, (-p.velocity_edge, p.velocity_edge)))
+
+    @property
+    def n_inputs(self) -> int:
+        return sum(len(e) + 1 for e in self.edges)
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(components, edges padded with +inf, offsets) as arrays for encode_active()."""
+        width = max(len(e) for e in self.edges)
+        padded = np.full((len(self.edges), width), np.inf)
+        offsets = np.zeros(len(self.edges), dtype=np.int64)
+        for i, e in enumerate(self.edges):
+            padded[i, :len(e)] = e
+            offsets[i] = sum(len(prev) + 1 for prev in self.edges[:i])
+        return np.array(self.components, dtype=np.int64), padded, offsets
+
+    def labels(self) -> list[str]:
+        """Human-readable names of the inputs, e.g. 'pole_angle[-1,0)deg'."""
+        labels = []
+        for component, edges in zip(self.components, self.edges):
+            bounds = (-np.inf, *edges, np.inf)
+            name, unit = STATE_NAMES[component], STATE_UNITS[component]
+            for lo, hi in zip(bounds[:-1], bounds[1:]):
+                labels.append(f"{name}[{lo:g},{hi:g}){unit}")
+        return labels
+
+    def active(self, state) -> np.ndarray:
+        """Indices of the spiking inputs (one per encoded variable)."""
+        components, edges, offsets = self.arrays()
+        out = np.empty(len(components), dtype=np.int64)
+        encode_active(np.asarray(state, dtype=np.float64), components, edges, offsets, out)
+        return out
+
+    def spikes(self, state) -> np.ndarray:
+        """The spike vector: 1 where the input spikes, 0 elsewhere (uint8, n_inputs long)."""
+        vector = np.zeros(self.n_inputs, dtype=np.uint8)
+        vector[self.active(state)] = 1
+        return vector
+
+
+@register_jitable
+def encode_active(state, components, edges, offsets, out):
+    """Write into `out` the index of the spiking input of each encoded variable: the interval is
+    the number of interior edges <= value (lower-inclusive intervals)."""
+    for v in range(components.shape[0]):
+        value = state[components[v]]
+        interval = 0
+        for k in range(edges.shape[1]):
+            if value >= edges[v, k]:
+                interval += 1
+        out[v] = offsets[v] + interval

@@ -1,0 +1,97 @@
+"""The trial, episode and seed protocol (section 3.2).
+
+An episode is `trials` (512) trials in which the network keeps learning. Trial: cart centred and
+at rest, pole at rest at an initial angle from a grid of 32 evenly spaced angles in +-1.5 deg
+(both ends included); it runs until the pole leaves +-12 deg, the cart leaves +-2.4 m, or
+10,000 successful steps. Successful steps are the steps before the failing one.
+
+Tick order: encode the state, infer and tag (the agent acts on the initial state first), apply
+the force and step the physics, then the success counter turns the outcome into a reward kind
+and the agent applies it.
+
+Seed protocol (so that any two implementations can be compared trial by trial):
+    rng = numpy.random.default_rng(seed)
+    weights = w_base + rng.uniform(0, w_range, size=(2, q, n_inputs))
+    initial angles = successive grid[rng.permutation(32)], concatenated, cut to `trials`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from .encoder import Encoder
+from .params import Params
+from .physics import CONTINUE, CartPole
+from .rln import RLNAgent, SuccessCounter
+
+
+def angle_grid(p: Params) -> np.ndarray:
+    """The initial angles (deg): -span + 2 span k / (n - 1), k = 0..n-1."""
+    k = np.arange(p.n_angles)
+    return -p.angle_span_deg + 2 * p.angle_span_deg * k / (p.n_angles - 1)
+
+
+def seed_setup(seed: int, p: Params) -> tuple[np.ndarray, np.ndarray]:
+    """(initial weights, initial angles of every trial) for a seed."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    rng = np.random.default_rng(seed)
+    weights = p.w_base + rng.uniform(0, p.w_range, size=(2, p.n_segments, p.n_inputs))
+    grid = angle_grid(p)
+    rounds = -(-p.trials // p.n_angles)
+    angles = np.concatenate([grid[rng.permutation(p.n_angles)] for _ in range(rounds)])
+    return weights, angles[:p.trials]
+
+
+@dataclass
+class EpisodeResult:
+    seed: int
+    initial_angles: np.ndarray  # (trials,) deg
+    steps: np.ndarray  # (trials,) successful steps
+    end_status: np.ndarray  # (trials,) physics status that ended the trial (CONTINUE = reached the cap)
+    final_weights: np.ndarray
+
+
+def run_trial(agent: RLNAgent, counter: SuccessCounter, env: CartPole, encoder: Encoder,
+              initial_angle_deg: float, p: Params, learn: bool = True,
+              trace: Callable[[tuple], None] | None = None) -> tuple[int, int]:
+    """Run one trial; returns (successful steps, end status). `trace` gets the state after each step."""
+    env.reset(initial_angle_deg)
+    agent.begin_trial()
+    counter.begin_trial()
+    steps = 0
+    while steps < p.max_steps:
+        action = agent.act(encoder.spikes(env.state))
+        status = env.step(action)
+        if trace is not None:
+            trace(env.state)
+        kind = counter.outcome(status != CONTINUE)
+        if learn:
+            agent.learn(kind)
+        if status != CONTINUE:
+            return steps, status
+        steps += 1
+    return steps, CONTINUE
+
+
+def run_episode(seed: int, p: Params, weights: np.ndarray | None = None, learn: bool = True,
+                angles: np.ndarray | None = None) -> EpisodeResult:
+    """One episode with the seed protocol; `weights`/`angles` override the seed's own."""
+    seed_weights, seed_angles = seed_setup(seed, p)
+    weights = seed_weights if weights is None else weights
+    angles = seed_angles if angles is None else np.asarray(angles, dtype=np.float64)
+    agent = RLNAgent(p, weights, seed=seed)
+    counter, env, encoder = SuccessCounter(p), CartPole(p), Encoder.from_params(p)
+    steps = np.zeros(len(angles), dtype=np.int64)
+    status = np.zeros(len(angles), dtype=np.int64)
+    for trial, angle in enumerate(angles):
+        steps[trial], status[trial] = run_trial(agent, counter, env, encoder, angle, p, learn)
+    return EpisodeResult(seed, angles, steps, status, agent.weights.copy())
+
+
+def evaluate_weights(weights: np.ndarray, p: Params) -> EpisodeResult:
+    """Fixed weights (no learning), one trial per grid angle: the paper's Figures 8 and 13."""
+    return run_episode(0, p, weights=weights, learn=False, angles=angle_grid(p))

@@ -1,0 +1,165 @@
+"""Parameters of the model: Table 2 of Smith (2024) plus every choice the paper leaves open.
+
+Each open choice is a named option whose default is the convention that reproduces the paper's
+numbers (see docs/REPRODUCTION.md for the evidence and the effect of switching each one).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+
+PHYSICS = ("paper", "correct")
+INTEGRATORS = ("semi_implicit", "euler")
+TIE_BREAKS = ("exact", "index", "random")
+TAGGING = ("winner", "both_neurons")
+E_FLAGS = ("latched", "live")
+SUCCESS_COUNTER = ("per_trial", "carry")
+
+
+class ParamError(ValueError):
+    """A bad parameter value; its message is one line meant for the user."""
+
+
+@dataclass(frozen=True)
+class Params:
+    """All model parameters. Defaults: Table 2 and section 3 of the paper, `paper` conventions."""
+
+    # Network and learning (section 3.2 and Table 2).
+    nsv: int = 1  # state variables encoded: 1 = angle, 2 = angle + cart velocity
+    segments: int | None = None  # segments per neuron; None = 3 (1 SV) or 9 (2 SV), as in the paper
+    sigma: int = 256  # success window: positive reward every sigma successful steps
+    omega: int = 256  # punishment window: length of the action path punished on failure
+    rho_plus: float = 1 / 128  # maximum reward capture (synapses whose e flag is 1)
+    rho_minus: float = 7 / 1024  # maximum reward backoff (synapses whose e flag is 0)
+    punish: float = 8 / 1024  # pi: maximum punishment decrement
+    w_max: float = 8.0
+    w_base: float = 4.5
+    w_range: float = 1 / 128
+
+    # Protocol (section 3.2).
+    trials: int = 512
+    max_steps: int = 10_000  # a trial stops after this many successful steps
+    n_angles: int = 32  # initial angles evenly spaced over [-angle_span_deg, +angle_span_deg]
+    angle_span_deg: float = 1.5
+
+    # Encoder (Table 1): angle intervals are fixed by the table, the velocity edge is open.
+    velocity_edge: float = 5.0  # |dx/dt| edge between the 3 velocity intervals, m/s
+
+    # Environment (section 1.2).
+    physics: str = "paper"  # "paper": the units slip that reproduces the figures; "correct": true equations
+    integrator: str = "semi_implicit"  # "semi_implicit" (velocities first) or "euler" (explicit)
+    cart_mass: float = 0.711
+    pole_mass: float = 0.209
+    pole_length: float = 0.326
+    gravity: float = 9.8
+    force: float = 10.0
+    tau: float = 0.02
+    angle_limit_deg: float = 12.0
+    track_limit_m: float = 2.4
+
+    # Open choices of the learning rule (see the conventions in docs/REPRODUCTION.md).
+    tie_break: str = "exact"  # WTA tie: "exact" un-ceiled sums then lowest index, "index", "random"
+    tagging: str = "winner"  # tag only the action path ("winner") or the winning segment of both neurons
+    e_flag: str = "latched"  # e flag latched at tagging ("latched") or read at reward time ("live")
+    success_counter: str = "per_trial"  # success counter reset each trial ("per_trial") or kept ("carry")
+
+    # Derived values; not set by users.
+    n_inputs: int = field(init=False)
+    n_segments: int = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.validate()
+        object.__setattr__(self, "n_inputs", 6 if self.nsv == 1 else 9)
+        object.__setattr__(self, "n_segments", self.segments or (3 if self.nsv == 1 else 9))
+
+    def validate(self) -> None:
+        """Raise ParamError with one clear line for the first bad value found."""
+        _choice("nsv", self.nsv, (1, 2), "state variables: 1 (angle) or 2 (angle and cart velocity)")
+        _choice("physics", self.physics, PHYSICS)
+        _choice("integrator", self.integrator, INTEGRATORS)
+        _choice("tie_break", self.tie_break, TIE_BREAKS)
+        _choice("tagging", self.tagging, TAGGING)
+        _choice("e_flag", self.e_flag, E_FLAGS)
+        _choice("success_counter", self.success_counter, SUCCESS_COUNTER)
+        segments = self.segments
+        if segments is not None and (isinstance(segments, bool) or not isinstance(segments, int)
+                                     or not 1 <= segments <= 64):
+            raise ParamError(f"segments must be an integer from 1 to 64, got {segments!r}")
+        for name in ("sigma", "omega", "trials", "max_steps", "n_angles"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ParamError(f"{name} must be a positive integer, got {value!r}")
+        positive = ("w_max", "cart_mass", "pole_mass", "pole_length", "gravity", "tau",
+                    "angle_limit_deg", "track_limit_m", "velocity_edge")
+        non_negative = ("rho_plus", "rho_minus", "punish", "w_base", "w_range", "force",
+                        "angle_span_deg")
+        for name in positive + non_negative:
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ParamError(f"{name} must be a finite number, got {value!r}")
+            if name in positive and value <= 0:
+                raise ParamError(f"{name} must be > 0, got {value!r}")
+            if value < 0:
+                raise ParamError(f"{name} must be >= 0, got {value!r}")
+        if self.w_base + self.w_range > self.w_max:
+            raise ParamError(f"w_base + w_range ({self.w_base + self.w_range:g}) must not exceed "
+                             f"w_max ({self.w_max:g})")
+        if self.angle_limit_deg > 12.0:
+            raise ParamError(f"angle_limit_deg must be <= 12 (Table 1 encodes only [-12, 12)), "
+                             f"got {self.angle_limit_deg!r}")
+        if self.angle_span_deg >= self.angle_limit_deg:
+            raise ParamError(f"angle_span_deg ({self.angle_span_deg:g}) must be below "
+                             f"angle_limit_deg ({self.angle_limit_deg:g})")
+        if self.max_steps >= 2**31:
+            raise ParamError(f"max_steps must be < 2**31, got {self.max_steps}")
+
+    def replace(self, **changes) -> "Params":
+        """A copy with some values changed (validated again)."""
+        current = {f.name: getattr(self, f.name) for f in fields(self) if f.init}
+        unknown = set(changes) - set(current)
+        if unknown:
+            raise ParamError(f"unknown parameter(s): {', '.join(sorted(unknown))}; "
+                             f"known: {', '.join(sorted(current))}")
+        return Params(**{**current, **changes})
+
+    def to_dict(self) -> dict:
+        """The user-settable values (what replace() and Params(**d) accept)."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.init}
+
+
+def _choice(name: str, value, allowed: tuple, meaning: str | None = None) -> None:
+    if isinstance(value, bool) or value not in allowed:
+        options = ", ".join(repr(a) for a in allowed)
+        raise ParamError(f"{name} must be one of {options}" + (f" ({meaning})" if meaning else "")
+                         + f", got {value!r}")
+
+
+def params_from_strings(values: dict[str, str], base: Params | None = None) -> Params:
+    """Params from text values (command line, ROS parameters, YAML), each converted to the
+    type of its field; a value that does not convert is one clear ParamError line."""
+    base = base or Params()
+    current = base.to_dict()
+    converted = {}
+    for name, text in values.items():
+        if name not in current:
+            raise ParamError(f"unknown parameter {name!r}; known: {', '.join(sorted(current))}")
+        default = current[name]
+        kind = int if name in ("segments",) or isinstance(default, int) else type(default)
+        try:
+            if isinstance(text, kind) and not isinstance(text, bool):
+                converted[name] = text
+            elif kind is int:
+                converted[name] = int(str(text), 10)
+            elif kind is float:
+                converted[name] = float(str(text))
+            else:
+                converted[name] = str(text)
+        except ValueError:
+            raise ParamError(f"{name} must be {'an integer' if kind is int else 'a number'}, "
+                             f"got {text!r}") from None
+    return base.replace(**converted)
+
+
+__all__ = ["Params", "ParamError", "params_from_strings", "PHYSICS", "INTEGRATORS", "TIE_BREAKS",
+           "TAGGING", "E_FLAGS", "SUCCESS_COUNTER"]

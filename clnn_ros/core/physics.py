@@ -1,0 +1,106 @@
+"""Cart-pole dynamics of Smith (2024), section 1.2, after Nagendra et al. (2017).
+
+Equations (F > 0 pushes toward +x; theta > 0 leans toward +x, so +F makes theta_acc < 0):
+
+    theta_acc = ((M+m) g sin(th) - cos(th) (F + m l th_dot^2 sin(th))) / ((4/3)(M+m) l - m l cos^2(th))
+    x_acc     = (F + m l (th_dot^2 sin(th) - theta_acc cos(th))) / (M+m)
+
+with M = 0.711 kg, m = 0.209 kg, l = 0.326 m, g = 9.8 m/s^2, F = +-10 N, tau = 0.02 s. This is the
+same model as Gymnasium's CartPole-v1 (Barto, Sutton & Anderson 1983; Florian 2007) with its own
+masses and half-length. The state is kept as (x [m], x_dot [m/s], theta [deg], theta_dot [deg/s]).
+
+Two physics modes:
+
+* ``correct``: the equations above in consistent units; theta_acc (rad/s^2) is converted to
+  deg/s^2 before it is added to theta_dot.
+* ``paper`` (default): the units slip that reproduces the paper's numbers. theta_acc is computed in
+  rad/s^2 but added to theta_dot in deg/s, so the pole's angular acceleration is too small by
+  180/pi; the cart sees the same scaled acceleration, so the motion is self-consistent, just with
+  a slow pole. Evidence: with it, no force lets the pole fall in ~275 steps and a constant force
+  drives the cart off the track in exactly 32 steps, the paper's section 3.1 figures (correct
+  physics gives ~35 steps for the first). See docs/REPRODUCTION.md.
+
+Integrators: ``semi_implicit`` Euler, velocities first (x_dot += tau x_acc; x += tau x_dot; ...),
+the paper's default, or explicit ``euler`` (positions from the old velocities, as Gymnasium's
+default). A trial fails when |theta| > angle limit or |x| > track limit after a step.
+
+The step function is written in the subset of Python that numba compiles (``register_jitable``),
+so the batch engine runs this very code.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba.extending import register_jitable
+
+from .params import Params
+
+DEG = math.pi / 180.0  # radians per degree
+CONTINUE, FAIL_ANGLE, FAIL_POSITION = 0, 1, 2
+FAILURE_REASONS = ("", "pole_angle", "cart_position")
+
+
+def physics_constants(p: Params) -> tuple:
+    """The numbers cartpole_step needs, as a flat tuple (numba passes tuples cheaply)."""
+    # How theta_acc in rad/s^2 becomes deg/s^2 in the state: the paper's slip skips the 180/pi.
+    angular_to_state = 1.0 if p.physics == "paper" else 180.0 / math.pi
+    return (p.cart_mass + p.pole_mass, p.pole_mass * p.pole_length, p.pole_length, p.gravity,
+            p.tau, angular_to_state, p.integrator == "semi_implicit", p.angle_limit_deg,
+            p.track_limit_m)
+
+
+@register_jitable
+def cartpole_step(x, x_dot, theta_deg, theta_dot_deg, force, constants):
+    """Advance one time step tau under `force` (N). Returns (x, x_dot, theta_deg, theta_dot_deg, status)
+    with status CONTINUE, FAIL_ANGLE or FAIL_POSITION."""
+    (total_mass, pole_mass_length, length, gravity, tau, angular_to_state, semi_implicit,
+     angle_limit_deg, track_limit_m) = constants
+    theta = theta_deg * DEG
+    theta_dot = theta_dot_deg * DEG
+    sin_theta = math.sin(theta)
+    cos_theta = math.cos(theta)
+    theta_acc = ((total_mass * gravity * sin_theta
+                  - cos_theta * (force + pole_mass_length * theta_dot * theta_dot * sin_theta))
+                 / ((4.0 / 3.0) * total_mass * length - pole_mass_length * cos_theta * cos_theta))
+    theta_acc_state = theta_acc * angular_to_state  # deg/s^2 as added to theta_dot_deg
+    theta_acc_seen = theta_acc_state * DEG  # what the cart equation sees, rad/s^2
+    x_acc = (force + pole_mass_length * (theta_dot * theta_dot * sin_theta
+                                         - theta_acc_seen * cos_theta)) / total_mass
+    if semi_implicit:
+        x_dot = x_dot + tau * x_acc
+        x = x + tau * x_dot
+        theta_dot_deg = theta_dot_deg + tau * theta_acc_state
+        theta_deg = theta_deg + tau * theta_dot_deg
+    else:
+        x = x + tau * x_dot
+        x_dot = x_dot + tau * x_acc
+        theta_deg = theta_deg + tau * theta_dot_deg
+        theta_dot_deg = theta_dot_deg + tau * theta_acc_state
+    status = CONTINUE
+    if abs(theta_deg) > angle_limit_deg:
+        status = FAIL_ANGLE
+    elif abs(x) > track_limit_m:
+        status = FAIL_POSITION
+    return x, x_dot, theta_deg, theta_dot_deg, status
+
+
+class CartPole:
+    """The environment as an object: reset to an initial angle, step with an action (0 = -F, 1 = +F)."""
+
+    def __init__(self, params: Params):
+        self.params = params
+        self._constants = physics_constants(params)
+        self.state = (0.0, 0.0, 0.0, 0.0)
+
+    def reset(self, initial_angle_deg: float) -> tuple:
+        """Trial start: cart centred and at rest, pole at rest at the given angle."""
+        self.state = (0.0, 0.0, float(initial_angle_deg), 0.0)
+        return self.state
+
+    def step(self, action: int) -> int:
+        """Apply -F (action 0) or +F (action 1) for one tick; returns the failure status."""
+        force = self.params.force if action == 1 else -self.params.force
+        *state, status = cartpole_step(*self.state, force, self._constants)
+        self.state = tuple(state)
+        return status
