@@ -100,7 +100,10 @@ class CartPole:
 
     def step(self, action: int) -> int:
         """Apply -F (action 0) or +F (action 1) for one tick; returns the failure status."""
-        force = self.params.force if action == 1 else -self.params.force
+        return self.step_force(self.params.force if action == 1 else -self.params.force)
+
+    def step_force(self, force: float) -> int:
+        """Apply any force (N) for one tick; returns the failure status."""
         *state, status = cartpole_step(*self.state, force, self._constants)
         self.state = tuple(state)
         return status
