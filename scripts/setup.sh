@@ -32,7 +32,7 @@ phase() { t0=$EPOCHREALTIME; printf 'setup: %-34s' "$1"; }
 done_() { printf '%s (%s s)\n' "${1:-done}" "$(since "$t0")"; }
 fail() { # fail LOG MESSAGE
   printf 'FAILED\nsetup: %s; last lines of %s:\n' "$2" "$1" >&2
-  tail -n 60 "$1" >&2 || true
+  grep -v 'is ignored: it is neither a file nor a directory' "$1" | tail -n 60 >&2 || true
   exit 1
 }
 hash_files() { # sha256 over the names and contents of the given files
@@ -66,7 +66,7 @@ pip_hash=$(hash_files "$ROOT/pyproject.toml" "$ROOT/requirements-ros.txt")
 if [ -f "$PIP_STAMP" ] && [ "$(cat "$PIP_STAMP")" = "$pip_hash" ]; then
   done_ "up to date"
 else
-  rm -f "$PIP_STAMP" "$MSGS_STAMP"
+  rm -f "$PIP_STAMP"
   ( cd "$ROOT" && "$VENV/bin/python" -m pip install -e ".[test]" -r requirements-ros.txt ) \
     > "$LOGS/pip.log" 2>&1 || fail "$LOGS/pip.log" "pip install failed"
   echo "$pip_hash" > "$PIP_STAMP"
@@ -96,7 +96,8 @@ fi
 # --- 4. build + install msgs_spec/ (clnn_ros_msgs) into the venv -----------------------------
 phase "build clnn_ros_msgs"
 mapfile -t msg_files < <(find "$MSGS_SRC" -type f | LC_ALL=C sort)
-msgs_hash=$( { cat "$PIP_STAMP"; hash_files "${msg_files[@]}"; } | sha256sum | cut -d' ' -f1)
+# (the ROS wheel pins are part of it: a build against other rosidl versions is redone)
+msgs_hash=$(hash_files "$ROOT/requirements-ros.txt" "${msg_files[@]}")
 SITE="$VENV/lib/python3.11/site-packages"
 if [ -f "$MSGS_STAMP" ] && [ "$(cat "$MSGS_STAMP")" = "$msgs_hash" ] \
    && [ -f "$SITE/clnn_ros_msgs/msg/__init__.py" ]; then
