@@ -1,0 +1,111 @@
+"""The reproduction CLI (clnn_ros.reproduce): seed specs, `learn` outputs equal to the batch engine,
+one-line errors without a traceback, and the calibration number (b) = 32 in paper mode."""
+
+from __future__ import annotations
+
+import csv
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from clnn_ros import reproduce
+from clnn_ros.batch import run_batch
+from clnn_ros.core.params import Params
+from clnn_ros.core.physics import FAIL_POSITION
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.parametrize("spec, seeds", [
+    ("0-3", [0, 1, 2, 3]),
+    ("0,3,5", [0, 3, 5]),
+    ("0-3,7", [0, 1, 2, 3, 7]),
+    (" 7 , 2-3 ", [2, 3, 7]),
+    ("5-5", [5]),
+    ("0-31", list(range(32))),
+])
+def test_parse_seeds_good(spec, seeds):
+    assert reproduce.parse_seeds(spec) == seeds
+
+
+@pytest.mark.parametrize("spec", ["", " ", "a", "3-1", "-1", "1,,2", "1-2-3", "0-3,2", "1.5", "0-"])
+def test_parse_seeds_bad(spec):
+    with pytest.raises(ValueError) as info:
+        reproduce.parse_seeds(spec)
+    assert "\n" not in str(info.value)
+
+
+def _read_csv(path: Path) -> tuple[list[str], list[dict]]:
+    with open(path, newline="") as f:
+        reader = csv.DictReader(f)
+        return reader.fieldnames, list(reader)
+
+
+@pytest.mark.parametrize("argv, params", [
+    (["--nsv", "1"], Params(nsv=1, trials=8)),
+    (["--nsv", "2", "--velocity-edge", "0.5", "--option", "e_flag=live"],
+     Params(nsv=2, trials=8, velocity_edge=0.5, e_flag="live")),
+])
+def test_learn_writes_what_run_batch_computes(tmp_path, capsys, argv, params):
+    seeds = [3, 5]
+    rc = reproduce.main(["learn", *argv, "--seeds", "3,5", "--trials", "8", "--out", str(tmp_path)])
+    assert rc == 0
+    ref = run_batch(seeds, params)
+    tag = f"{params.nsv}sv"
+
+    header, rows = _read_csv(tmp_path / f"learn_{tag}.csv")
+    assert header == ["seed", "trial", "initial_angle_deg", "steps", "end_reason"]
+    assert len(rows) == len(seeds) * 8
+    for row in rows:
+        k, trial = seeds.index(int(row["seed"])), int(row["trial"])
+        assert float(row["initial_angle_deg"]) == ref.initial_angles[k, trial]
+        assert int(row["steps"]) == ref.steps[k, trial]
+        assert row["end_reason"] == reproduce.END_REASONS[int(ref.end_status[k, trial])]
+
+    saved = np.load(tmp_path / f"final_weights_{tag}.npz")
+    np.testing.assert_array_equal(saved["final_weights"], ref.final_weights)
+    np.testing.assert_array_equal(saved["seeds"], seeds)
+    header, rows = _read_csv(tmp_path / f"final_weights_{tag}.csv")
+    assert header == ["seed", "neuron", "segment", "input", "weight"]
+    assert len(rows) == ref.final_weights.size
+    for row in rows[:50]:
+        k = seeds.index(int(row["seed"]))
+        assert float(row["weight"]) == ref.final_weights[k, int(row["neuron"]), int(row["segment"]),
+                                                          int(row["input"])]
+    out = capsys.readouterr().out
+    assert f"overall mean {ref.steps.mean():.1f}" in out
+
+
+@pytest.mark.parametrize("bad", [
+    ["--option", "tie_break=bogus"],
+    ["--option", "no_such_field=1"],
+    ["--option", "novalue"],
+    ["--seeds", "3-1"],
+    ["--velocity-edge", "fast"],
+])
+def test_bad_input_is_one_line_exit_2(tmp_path, bad):
+    env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    proc = subprocess.run([sys.executable, "-m", "clnn_ros.reproduce", "learn", "--nsv", "1",
+                           "--trials", "2", "--out", str(tmp_path), *bad],
+                          capture_output=True, text=True, cwd=ROOT, env=env, timeout=120)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert "Traceback" not in proc.stderr and "error" in lines[0]
+    assert not (tmp_path / "learn_1sv.csv").exists()
+
+
+def test_calibrate_b_is_32_in_paper_mode(tmp_path, capsys):
+    p = Params()
+    assert reproduce.constant_force_trial(p, +p.force) == (32, FAIL_POSITION)
+    assert reproduce.constant_force_trial(p, -p.force) == (32, FAIL_POSITION)
+    assert reproduce.main(["calibrate", "--out", str(tmp_path)]) == 0
+    _, rows = _read_csv(tmp_path / "calib_constant_force.csv")
+    paper = [r for r in rows if (r["physics"], r["integrator"]) == ("paper", "semi_implicit")]
+    assert {(r["force"], r["steps"], r["end_reason"]) for r in paper} == {
+        ("+F", "32", "cart_position"), ("-F", "32", "cart_position")}
+    assert "paper/semi_implicit" in capsys.readouterr().out
