@@ -69,9 +69,9 @@ def test_punishment_update_by_hand():
     weights[0, 1, 2] = 4.9  # input 2 drives neuron 0, segment 1
     agent = RLNAgent(p, weights)
     eye = np.eye(6, dtype=np.uint8)
-    assert agent.act(eye[2]) == 0  # tick 1: c-(0,1,2) = 4
+    assert agent.act(eye[2])[0] == 0  # tick 1: c-(0,1,2) = 4
     agent.learn(NONE)  # decays to 3
-    assert agent.act(eye[3]) == 0  # tick 2: c-(0,0,3) = 4
+    assert agent.act(eye[3])[0] == 0  # tick 2: c-(0,0,3) = 4
     agent.learn(PUNISH)  # w -= pi c / omega: 0.5*4/4 = 0.5 at the head, 0.5*3/4 = 0.375 before
     expected = weights.copy()
     expected[0, 0, 3] -= 0.5
@@ -89,7 +89,7 @@ def test_reward_update_by_hand():
     spikes = np.eye(6, dtype=np.uint8)[5]
     kinds = []
     for _ in range(4):
-        assert agent.act(spikes) == 1
+        assert agent.act(spikes)[0] == 1
         kinds.append(counter.outcome(failed=False))
         agent.learn(kinds[-1])
     assert kinds == [NONE, NONE, NONE, REWARD]

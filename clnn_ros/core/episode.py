@@ -64,7 +64,7 @@ def run_trial(agent: RLNAgent, counter: SuccessCounter, env: CartPole, encoder: 
     counter.begin_trial()
     steps = 0
     while steps < p.max_steps:
-        action = agent.act(encoder.spikes(env.state))
+        action, _ = agent.act(encoder.spikes(env.state))
         status = env.step(action)
         if trace is not None:
             trace(env.state)

@@ -99,15 +99,16 @@ class RLNAgent:
                 return int(tied[int(next_uniform(self.random_state) * len(tied))])
         return int(tied[np.argmax(exact[tied])])  # argmax keeps the lowest index among equals
 
-    def act(self, spikes: np.ndarray) -> int:
-        """Infer and tag the action path; returns the action (0 = -F, 1 = +F)."""
+    def act(self, spikes: np.ndarray) -> tuple[int, int]:
+        """Infer and tag the action path; returns (action = winning neuron, 0 = -F and 1 = +F,
+        its winning segment)."""
         spikes = np.asarray(spikes, dtype=np.uint8)
         neuron, segments = self.infer(spikes)
         self.last_spikes = spikes
         self._tag(neuron, segments[neuron], spikes)
         if self.p.tagging == "both_neurons":
             self._tag(1 - neuron, segments[1 - neuron], spikes)
-        return neuron
+        return neuron, segments[neuron]
 
     def _tag(self, neuron: int, segment: int, spikes: np.ndarray) -> None:
         self.punish_counter[neuron, segment, spikes == 1] = self.p.omega

@@ -1,0 +1,218 @@
+"""What every node of the graph shares: topics, QoS, parameters, readiness, and main().
+
+Lockstep protocol (one tick = one physics step tau of sim time; every message carries the tick):
+
+    trial_manager --/clock(t) [+ /trial/event START(t)]--> environment
+    environment   --/cartpole/state(t)--> encoder, reward, trial_manager
+    encoder       --/rln/spikes(t)--> agent            reward --/rln/reward(t)--> agent
+    agent         --/rln/action(t)--> environment (applied at tick t+1), trial_manager
+    trial_manager, holding state(t) and action(t), publishes /clock(t+1)
+
+No message of tick t+1 can exist before every node has finished tick t, so a node only ever
+receives messages of its current tick; anything else is refused with a logged reason.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+from typing import Callable
+
+from .. import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
+from std_msgs.msg import String
+
+from clnn_ros_msgs.msg import TrialEvent
+
+from ..core.params import ParamError, Params, params_from_strings
+
+# Topics of the graph (docs/ENV_CONTRACT.md names them for environment nodes).
+CLOCK = "/clock"
+TRIAL_EVENT = "/trial/event"
+STATE = "/cartpole/state"
+SPIKES = "/rln/spikes"
+REWARD = "/rln/reward"
+ACTION = "/rln/action"
+WEIGHTS = "/rln/weights"
+READY = "/graph/ready"
+
+# In lockstep a publisher is never more than a few messages ahead of any subscriber (at most
+# END, EPISODE_END and START on /trial/event within one tick), so depth 64 cannot overflow.
+LOCKSTEP_QOS = QoSProfile(depth=64, reliability=ReliabilityPolicy.RELIABLE,
+                          history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
+# A readiness announcement must reach a trial manager that starts later than the node; the
+# depth keeps every node's announcement when several arrive at once.
+READY_QOS = QoSProfile(depth=16, reliability=ReliabilityPolicy.RELIABLE,
+                       history=HistoryPolicy.KEEP_LAST,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+# The nodes the trial manager waits for before the first tick.
+GRAPH_NODES = ("environment", "encoder", "reward", "agent")
+# Parameters rclpy itself handles.
+ROS_BUILTIN_PARAMETERS = {"use_sim_time", "start_type_description_service"}
+# Settings of the run that are not model parameters, with their defaults.
+RUN_SETTINGS = {"seed": 0, "stall_timeout_s": 5.0, "out_dir": "", "progress": True,
+                "init_weights": ""}
+
+
+class GraphNode(Node):
+    """A node of the graph. It reads the shared parameters into a validated core Params,
+    announces on /graph/ready once each of its publishers has matched the subscribers the graph
+    gives it, and stops when the trial manager announces the end of the episode."""
+
+    listens_to_trial_events = True  # every node but their publisher, the trial manager
+
+    def __init__(self, name: str, publishers: dict, context=None, overrides: dict | None = None):
+        """publishers: {attribute: (message type, topic, subscribers the graph gives it)};
+        overrides: parameter values given in-process (composed mode) instead of --ros-args."""
+        super().__init__(name, context=context,
+                         automatically_declare_parameters_from_overrides=True,
+                         parameter_overrides=[Parameter(k, value=v)
+                                              for k, v in (overrides or {}).items()])
+        self.params, self.settings = read_parameters(self)
+        self.tau_ns = round(self.params.tau * 1e9)
+        self.refused = 0
+        self.finished = Future()
+        self._expected = []
+        for attribute, (msg_type, topic, subscribers) in publishers.items():
+            publisher = self.create_publisher(msg_type, topic, LOCKSTEP_QOS)
+            setattr(self, attribute, publisher)
+            self._expected.append((publisher, subscribers))
+        self._ready_publisher = self.create_publisher(String, READY, READY_QOS)
+        self._ready_timer = self.create_timer(0.02, self._announce_when_matched)
+        if self.listens_to_trial_events:
+            self.subscribe(TrialEvent, TRIAL_EVENT, self.on_trial_event)
+
+    def _announce_when_matched(self) -> None:
+        if all(p.get_subscription_count() >= n for p, n in self._expected):
+            self._ready_publisher.publish(String(data=self.get_name()))
+            self._ready_timer.cancel()
+
+    def subscribe(self, msg_type, topic: str, callback: Callable) -> None:
+        self.create_subscription(msg_type, topic, callback, LOCKSTEP_QOS)
+
+    def stamp(self, msg, tick: int, trial: int):
+        """Fill the common fields: header stamped with the tick's sim time, tick and trial."""
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(tick * self.tau_ns, 1_000_000_000)
+        msg.tick, msg.trial = tick, trial
+        return msg
+
+    def refuse(self, topic: str, msg, reason: str) -> None:
+        """Log and drop a bad message; the node's state is not touched."""
+        self.refused += 1
+        self.get_logger().error(f"refused {topic} tick {getattr(msg, 'tick', '?')}: {reason}")
+
+    def on_trial_event(self, event: TrialEvent) -> None:
+        if event.event == TrialEvent.EPISODE_END:
+            self.finish(0)
+
+    def finish(self, exit_code: int) -> None:
+        if not self.finished.done():
+            self.finished.set_result(exit_code)
+
+
+def read_parameters(node: Node) -> tuple[Params, dict]:
+    """Every parameter given to the node (command line or --params-file), validated: model
+    parameters become a core Params, the rest the run settings; an unknown name is an error.
+    Undeclared parameters are then declared with their defaults, so all of them are listed."""
+    given = {name: p.value for name, p in node._parameter_overrides.items()
+             if name not in ROS_BUILTIN_PARAMETERS}
+    settings = dict(RUN_SETTINGS)
+    for name in set(given) & set(settings):
+        settings[name] = convert_setting(name, given.pop(name))
+    if given.get("segments") == 0:
+        given.pop("segments")  # 0 stands for the paper's default (ROS has no null parameter)
+    params = params_from_strings(given)
+    for name, value in {**params.to_dict(), **settings}.items():
+        if not node.has_parameter(name):
+            node.declare_parameter(name, 0 if value is None else value)
+    return params, settings
+
+
+def convert_setting(name: str, value):
+    default = RUN_SETTINGS[name]
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise ParamError(f"{name} must be true or false, got {value!r}")
+        return value
+    if isinstance(default, str):
+        return str(value)
+    try:
+        converted = type(default)(value)
+    except (TypeError, ValueError):
+        raise ParamError(f"{name} must be a number, got {value!r}") from None
+    if isinstance(value, bool) or converted < 0 or converted != converted:
+        raise ParamError(f"{name} must be a number >= 0, got {value!r}")
+    return converted
+
+
+def make_executor(context=None):
+    """rclpy's EventsExecutor: the fastest executor measured here (docs/ROS_GRAPH.md)."""
+    from rclpy.experimental import EventsExecutor
+    return EventsExecutor(context=context)
+
+
+def spin_until_finished(executor, finished: Future, context=None) -> None:
+    """Spin until `finished` is done or rclpy shuts down (Ctrl-C). EventsExecutor's own
+    spin_until_future_complete does not return when a callback completes the future."""
+    while not finished.done() and rclpy.ok(context=context):
+        executor.spin_once(timeout_sec=0.1)
+
+
+def node_main(factory: Callable[[], GraphNode], argv: list[str] | None = None) -> int:
+    """Run one node in its own process until the episode ends; returns the exit status.
+    Bad parameters: one error line, exit 2. SIGINT/SIGTERM: clean shutdown, 130/143."""
+    argv = sys.argv if argv is None else argv
+    received = []
+    for signum in (signal.SIGINT, signal.SIGTERM):  # rclpy's handler chains to these
+        signal.signal(signum, lambda number, _frame: received.append(number))
+    rclpy.init(args=argv)
+    node = None
+    try:
+        node = factory()
+        executor = make_executor()
+        executor.add_node(node)
+        spin_until_finished(executor, node.finished)
+        return node.finished.result() if node.finished.done() else 128 + signal.SIGINT
+    except ParamError as error:
+        print(f"{os.path.basename(argv[0])}: error: {error}", file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return 128 + (received[0] if received else signal.SIGINT)
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+class TickJoin:
+    """The messages of the current tick, one from each input topic. When all are in, they go to
+    `complete` together and the join moves to the next tick; a message of another tick, or a
+    second one from the same topic, is refused."""
+
+    def __init__(self, node: GraphNode, topics: tuple[str, ...], complete: Callable[[dict], None]):
+        self.node, self.topics, self.complete = node, topics, complete
+        self.tick = 0
+        self.inbox = {}
+
+    def offer(self, topic: str, msg) -> None:
+        if msg.tick != self.tick:
+            self.node.refuse(topic, msg, f"expected tick {self.tick}")
+        elif topic in self.inbox:
+            self.node.refuse(topic, msg, f"a second message for tick {self.tick}")
+        else:
+            self.inbox[topic] = msg
+            if len(self.inbox) == len(self.topics):
+                inbox, self.inbox = self.inbox, {}
+                self.tick += 1
+                self.complete(inbox)
+
+    def receiver(self, topic: str) -> Callable:
+        return lambda msg: self.offer(topic, msg)

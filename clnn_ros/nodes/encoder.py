@@ -1,0 +1,46 @@
+"""Encoder node: cart-pole state -> spike vector (Table 1, 1 or 2 state variables).
+
+    python -m clnn_ros.nodes.encoder --ros-args -p nsv:=2 -p velocity_edge:=0.5
+"""
+
+from __future__ import annotations
+
+import math
+
+from clnn_ros_msgs.msg import CartPoleState, SpikeVector
+
+from ..core.encoder import Encoder
+from .common import SPIKES, STATE, GraphNode, node_main
+
+
+class EncoderNode(GraphNode):
+    def __init__(self, **options):
+        # spike subscribers: agent, trial manager
+        super().__init__("encoder", {"spikes_pub": (SpikeVector, SPIKES, 2)}, **options)
+        self.encoder = Encoder.from_params(self.params)
+        self.labels = self.encoder.labels()
+        self.tick = 0
+        self.subscribe(CartPoleState, STATE, self.on_state)
+
+    def on_state(self, msg: CartPoleState) -> None:
+        state = (msg.cart_position_m, msg.cart_velocity_m_per_s, msg.pole_angle_deg,
+                 msg.pole_angular_velocity_deg_per_s)
+        if msg.tick != self.tick:
+            self.refuse(STATE, msg, f"expected tick {self.tick}")
+            return
+        if not all(math.isfinite(v) for v in state):
+            self.refuse(STATE, msg, f"non-finite state {state}")
+            return
+        spikes = self.encoder.spikes(state)
+        self.spikes_pub.publish(self.stamp(SpikeVector(
+            spikes=spikes.tolist(), input_labels=self.labels,
+            spiking_inputs=spikes.nonzero()[0].tolist()), msg.tick, msg.trial))
+        self.tick += 1
+
+
+def main() -> None:
+    raise SystemExit(node_main(EncoderNode))
+
+
+if __name__ == "__main__":
+    main()

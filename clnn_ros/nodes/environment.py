@@ -1,0 +1,101 @@
+"""Environment node: owns the cart-pole (core physics), applies actions, publishes the state.
+
+    python -m clnn_ros.nodes.environment --ros-args -p physics:=paper
+
+Tick t: on /clock(t) together with either /trial/event START(t) (reset the pole to the trial's
+initial angle) or /rln/action(t-1) (apply the force, one physics step), publish
+/cartpole/state(t). Another simulator or a robot replaces this node by keeping that contract
+(docs/ENV_CONTRACT.md).
+"""
+
+from __future__ import annotations
+
+import math
+
+from clnn_ros_msgs.msg import Action, CartPoleState, TrialEvent
+from rosgraph_msgs.msg import Clock
+
+from ..core.physics import CONTINUE, FAILURE_REASONS, CartPole
+from .common import ACTION, CLOCK, STATE, TRIAL_EVENT, GraphNode, node_main
+
+
+class EnvironmentNode(GraphNode):
+    def __init__(self, **options):
+        # state subscribers: encoder, reward, trial manager
+        super().__init__("environment", {"state_pub": (CartPoleState, STATE, 3)}, **options)
+        self.cartpole = CartPole(self.params)
+        self.tick = 0
+        self.trial = -1
+        self.successful_steps = 0
+        self.trial_over = True  # the first tick is a trial start
+        self.pending = {}  # this tick's inputs: "clock", and "start" or "action"
+        self.subscribe(Clock, CLOCK, self.on_clock)
+        self.subscribe(Action, ACTION, self.on_action)
+
+    def on_clock(self, clock: Clock) -> None:
+        tick, rest = divmod(clock.clock.sec * 1_000_000_000 + clock.clock.nanosec, self.tau_ns)
+        if rest or tick != self.tick:
+            self.refuse(CLOCK, clock, f"sim time {clock.clock.sec}.{clock.clock.nanosec:09d} s is "
+                                      f"not tick {self.tick}")
+            return
+        self._offer("clock", clock)
+
+    def on_trial_event(self, event: TrialEvent) -> None:
+        super().on_trial_event(event)
+        if event.event != TrialEvent.START:
+            return
+        if event.tick != self.tick or not self.trial_over:
+            self.refuse(TRIAL_EVENT, event, f"START expected only at the tick after a trial "
+                                            f"ends (tick {self.tick})")
+        elif not math.isfinite(event.initial_angle_deg) or abs(event.initial_angle_deg) >= \
+                self.params.angle_limit_deg:
+            self.refuse(TRIAL_EVENT, event, f"initial angle {event.initial_angle_deg} is not "
+                                            f"inside +-{self.params.angle_limit_deg} deg")
+        else:
+            self._offer("start", event)
+
+    def on_action(self, action: Action) -> None:
+        if action.tick + 1 != self.tick:
+            self.refuse(ACTION, action, f"expected the action of tick {self.tick - 1}")
+        elif action.force_direction not in (-1, 0, 1):
+            self.refuse(ACTION, action, f"force_direction {action.force_direction} is not -1, 0 or 1")
+        elif (action.force_direction == 0) != self.trial_over:
+            self.refuse(ACTION, action, "force_direction 0 is only for the last tick of a trial"
+                        if action.force_direction == 0 else "the trial is over: no force applies")
+        elif action.force_direction != 0:
+            self._offer("action", action)
+
+    def _offer(self, name: str, msg) -> None:
+        if name in self.pending:
+            self.refuse(msg.__class__.__name__, msg, f"a second {name} for tick {self.tick}")
+            return
+        self.pending[name] = msg
+        if "clock" in self.pending and ("start" in self.pending or "action" in self.pending):
+            self._advance()
+
+    def _advance(self) -> None:
+        start, action = self.pending.get("start"), self.pending.get("action")
+        self.pending = {}
+        status = CONTINUE
+        if start is not None:
+            self.cartpole.reset(start.initial_angle_deg)
+            self.trial, self.successful_steps = start.trial, 0
+        else:
+            status = self.cartpole.step(1 if action.force_direction > 0 else 0)
+            self.successful_steps += status == CONTINUE
+        self.trial_over = status != CONTINUE or self.successful_steps >= self.params.max_steps
+        x, x_dot, theta, theta_dot = self.cartpole.state
+        self.state_pub.publish(self.stamp(CartPoleState(
+            cart_position_m=x, cart_velocity_m_per_s=x_dot, pole_angle_deg=theta,
+            pole_angular_velocity_deg_per_s=theta_dot, failed=status != CONTINUE,
+            failure_reason=FAILURE_REASONS[status], successful_steps=self.successful_steps),
+            self.tick, self.trial))
+        self.tick += 1
+
+
+def main() -> None:
+    raise SystemExit(node_main(EnvironmentNode))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,47 @@
+"""Reward node: the success counter. Each state's outcome becomes the paper's 1-hot reward R:
+[0,1] punishment when the step failed, [1,0] a positive reward every sigma successful steps,
+[0,0] otherwise; it also tells the agent when the trial is over.
+
+    python -m clnn_ros.nodes.reward --ros-args -p sigma:=256
+"""
+
+from __future__ import annotations
+
+from clnn_ros_msgs.msg import CartPoleState, Reward
+
+from ..core.rln import NONE, ONE_HOT, REWARD_KINDS, SuccessCounter
+from .common import REWARD, STATE, GraphNode, node_main
+
+
+class RewardNode(GraphNode):
+    def __init__(self, **options):
+        # reward subscribers: agent, trial manager
+        super().__init__("reward", {"reward_pub": (Reward, REWARD, 2)}, **options)
+        self.counter = SuccessCounter(self.params)
+        self.tick = 0
+        self.trial = -1
+        self.subscribe(CartPoleState, STATE, self.on_state)
+
+    def on_state(self, msg: CartPoleState) -> None:
+        if msg.tick != self.tick:
+            self.refuse(STATE, msg, f"expected tick {self.tick}")
+            return
+        if msg.trial != self.trial:  # the trial's first state: no step has been taken yet
+            self.trial = msg.trial
+            self.counter.begin_trial()
+            kind = NONE
+        else:
+            kind = self.counter.outcome(msg.failed)
+        over = msg.failed or msg.successful_steps >= self.params.max_steps
+        self.reward_pub.publish(self.stamp(Reward(
+            reward_one_hot=ONE_HOT[kind], kind=REWARD_KINDS[kind],
+            success_counter=self.counter.count, trial_over=over), msg.tick, msg.trial))
+        self.tick += 1
+
+
+def main() -> None:
+    raise SystemExit(node_main(RewardNode))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,193 @@
+"""Start the whole ROS 2 graph (environment, encoder, reward, agent, trial manager), run one
+episode and print a summary.
+
+    python -m clnn_ros.run_all                       # the demonstration (about a minute)
+    python -m clnn_ros.run_all --seed 1 --nsv 1 --trials 32 --out DIR
+    python -m clnn_ros.run_all --composed            # all nodes in one process, one executor
+
+Each node runs as its own process (`python -m clnn_ros.nodes.<name>`) with the same parameters
+YAML; DDS discovery stays on loopback unless ROS_AUTOMATIC_DISCOVERY_RANGE says otherwise.
+Exit status: 0 done, 1 the graph failed (stall, crashed node), 2 bad input, 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import yaml
+
+from . import rosenv  # noqa: F401  (loopback DDS discovery by default)
+from .core.params import ParamError, Params, params_from_strings
+from .nodes.common import RUN_SETTINGS, convert_setting
+
+NODES = ("environment", "encoder", "reward", "agent", "trial_manager")
+# The demonstration: seed 1 learns visibly within 24 trials (see docs/ROS_GRAPH.md).
+DEMO = dict(seed=1, trials=24, nsv=1)
+SHUTDOWN_GRACE_S = 5.0  # how long nodes get to exit after the episode ends or Ctrl-C
+
+
+def parse_args(argv):
+    parser = argparse.ArgumentParser(prog="python -m clnn_ros.run_all", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seed", type=int, default=DEMO["seed"])
+    parser.add_argument("--trials", type=int, default=DEMO["trials"])
+    parser.add_argument("--nsv", type=int, default=DEMO["nsv"], help="1: angle; 2: angle + cart velocity")
+    parser.add_argument("--physics", help="paper (default) or correct")
+    parser.add_argument("--velocity-edge", type=float, help="2 SV: |dx/dt| edge in m/s (Table 1: 5)")
+    parser.add_argument("--max-steps", type=int, help="successful steps that end a trial (10000)")
+    parser.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                        help="any other model parameter, e.g. --option tie_break=index")
+    parser.add_argument("--params-file", type=Path,
+                        help="a ROS 2 parameters YAML (/**: ros__parameters: ...); options win")
+    parser.add_argument("--composed", action="store_true",
+                        help="all nodes in one process with one executor")
+    parser.add_argument("--out", type=Path, help="write trials.csv, final_weights.npy, summary.json")
+    parser.add_argument("--stall-timeout", type=float, default=RUN_SETTINGS["stall_timeout_s"],
+                        help="seconds without progress before the graph is declared stalled")
+    parser.add_argument("--quiet", action="store_true", help="no per-trial progress lines")
+    return parser.parse_args(argv)
+
+
+def build_parameters(args) -> dict:
+    """The parameter values every node gets, validated here before any node starts."""
+    values = {}
+    if args.params_file is not None:
+        values.update(read_params_file(args.params_file))
+    for item in args.option:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise ParamError(f"--option expects KEY=VALUE, got {item!r}")
+        values[key.strip()] = yaml.safe_load(value)
+    for key, value in (("seed", args.seed), ("trials", args.trials), ("nsv", args.nsv),
+                       ("physics", args.physics), ("velocity_edge", args.velocity_edge),
+                       ("max_steps", args.max_steps), ("stall_timeout_s", args.stall_timeout)):
+        if value is not None:
+            values[key] = value
+    values["progress"] = not args.quiet
+    model = {k: v for k, v in values.items() if k not in RUN_SETTINGS}
+    params_from_strings(model)  # raises ParamError with one line
+    for key in set(values) & set(RUN_SETTINGS):
+        values[key] = convert_setting(key, values[key])
+    return values
+
+
+def read_params_file(path: Path) -> dict:
+    try:
+        document = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as error:
+        raise ParamError(f"cannot read params file {path}: {str(error).splitlines()[0]}") from None
+    sections = [v.get("ros__parameters") for v in (document or {}).values()
+                if isinstance(v, dict)] if isinstance(document, dict) else []
+    if not sections or not all(isinstance(s, dict) for s in sections):
+        raise ParamError(f"params file {path} has no '<node>: ros__parameters:' mapping")
+    merged = {}
+    for section in sections:
+        merged.update(section)
+    return merged
+
+
+def run_separate(values: dict, workdir: Path) -> int:
+    params_file = workdir / "params.yaml"
+    params_file.write_text(yaml.safe_dump({"/**": {"ros__parameters": values}}))
+    processes = {}
+    for name in NODES:
+        processes[name] = subprocess.Popen(
+            [sys.executable, "-m", f"clnn_ros.nodes.{name}", "--ros-args", "--params-file",
+             str(params_file), "--log-level", "warn"])
+    interrupted = []
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda number, _frame: interrupted.append(number))
+    try:
+        while processes["trial_manager"].poll() is None and not interrupted:
+            time.sleep(0.05)
+        for process in processes.values():
+            if interrupted and process.poll() is None:
+                process.send_signal(signal.SIGINT)
+    finally:
+        stop_all(processes)
+    if interrupted:
+        return 128 + interrupted[0]
+    return processes["trial_manager"].returncode
+
+
+def stop_all(processes: dict) -> None:
+    """Give every node the grace period to exit by itself, then terminate, then kill."""
+    deadline = time.monotonic() + SHUTDOWN_GRACE_S
+    for process in processes.values():
+        try:
+            process.wait(timeout=max(0.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            process.terminate()
+            try:
+                process.wait(timeout=2.0)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+
+
+def run_composed(values: dict) -> int:
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+
+    from .nodes.agent import AgentNode
+    from .nodes.common import make_executor, spin_until_finished
+    from .nodes.encoder import EncoderNode
+    from .nodes.environment import EnvironmentNode
+    from .nodes.reward import RewardNode
+    from .nodes.trial_manager import TrialManagerNode
+
+    rclpy.init()
+    nodes = []
+    try:
+        nodes = [cls(overrides=values) for cls in (EnvironmentNode, EncoderNode, RewardNode,
+                                                   AgentNode, TrialManagerNode)]
+        executor = make_executor()
+        for node in nodes:
+            executor.add_node(node)
+        spin_until_finished(executor, nodes[-1].finished)
+        return nodes[-1].finished.result() if nodes[-1].finished.done() else 130
+    except (KeyboardInterrupt, ExternalShutdownException):
+        return 130
+    finally:
+        for node in nodes:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    try:
+        values = build_parameters(args)
+    except ParamError as error:
+        print(f"run_all: error: {error}", file=sys.stderr)
+        return 2
+    with tempfile.TemporaryDirectory(prefix="clnn_ros_") as tmp:
+        out = args.out or Path(tmp) / "out"
+        values["out_dir"] = str(out.resolve())
+        mode = "composed (one process)" if args.composed else f"{len(NODES)} processes"
+        print(f"run_all: seed {values['seed']}, {values['trials']} trials, {values['nsv']} SV, "
+              f"{mode}", flush=True)
+        status = run_composed(values) if args.composed else run_separate(values, Path(tmp))
+        summary_file = out / "summary.json"
+        if summary_file.exists():
+            summary = json.loads(summary_file.read_text())
+            rate = summary["ticks_per_s"] or 0.0
+            mean = summary["mean_steps"]
+            print(f"run_all: {summary['exit_reason']}: {summary['trials']} trials, mean steps "
+                  f"{mean if mean is None else round(mean, 1)}, {summary['ticks']} ticks, "
+                  f"{rate:.0f} ticks/s" + (f"; results in {args.out}" if args.out else ""))
+    if status == 130 or status == 128 + signal.SIGTERM:
+        print("run_all: interrupted", file=sys.stderr)
+    elif status != 0:
+        print(f"run_all: error: the graph failed (exit status {status})", file=sys.stderr)
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())
