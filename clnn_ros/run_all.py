@@ -23,9 +23,19 @@ from pathlib import Path
 
 import yaml
 
-from . import rosenv  # noqa: F401  (loopback DDS discovery by default)
-from .core.params import ParamError, Params, params_from_strings
-from .nodes.common import RUN_SETTINGS, convert_setting
+from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
+
+import rclpy
+from rclpy.signals import SignalHandlerOptions
+
+from .core.params import ParamError, params_from_strings
+from .nodes.agent import AgentNode
+from .nodes.common import (RUN_SETTINGS, catch_signals, convert_setting, make_executor,
+                           spin_until_finished)
+from .nodes.encoder import EncoderNode
+from .nodes.environment import EnvironmentNode
+from .nodes.reward import RewardNode
+from .nodes.trial_manager import TrialManagerNode
 
 NODES = ("environment", "encoder", "reward", "agent", "trial_manager")
 # The demonstration: seed 1 learns visibly within 24 trials (see docs/ROS_GRAPH.md).
@@ -100,9 +110,7 @@ def run_separate(values: dict, workdir: Path) -> int:
         processes[name] = subprocess.Popen(
             [sys.executable, "-m", f"clnn_ros.nodes.{name}", "--ros-args", "--params-file",
              str(params_file), "--log-level", "warn"])
-    interrupted = []
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda number, _frame: interrupted.append(number))
+    interrupted = catch_signals()
     try:
         while processes["trial_manager"].poll() is None and not interrupted:
             time.sleep(0.05)
@@ -132,17 +140,8 @@ def stop_all(processes: dict) -> None:
 
 
 def run_composed(values: dict) -> int:
-    import rclpy
-    from rclpy.executors import ExternalShutdownException
-
-    from .nodes.agent import AgentNode
-    from .nodes.common import make_executor, spin_until_finished
-    from .nodes.encoder import EncoderNode
-    from .nodes.environment import EnvironmentNode
-    from .nodes.reward import RewardNode
-    from .nodes.trial_manager import TrialManagerNode
-
-    rclpy.init()
+    signals = catch_signals()
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     nodes = []
     try:
         nodes = [cls(overrides=values) for cls in (EnvironmentNode, EncoderNode, RewardNode,
@@ -150,10 +149,12 @@ def run_composed(values: dict) -> int:
         executor = make_executor()
         for node in nodes:
             executor.add_node(node)
-        spin_until_finished(executor, nodes[-1].finished)
-        return nodes[-1].finished.result() if nodes[-1].finished.done() else 130
-    except (KeyboardInterrupt, ExternalShutdownException):
-        return 130
+        spin_until_finished(executor, nodes[-1].finished, signals)
+        if signals:
+            for node in nodes:
+                node.interrupted()
+            return 128 + signals[0]
+        return nodes[-1].finished.result()
     finally:
         for node in nodes:
             node.destroy_node()
@@ -175,17 +176,18 @@ def main(argv=None) -> int:
               f"{mode}", flush=True)
         status = run_composed(values) if args.composed else run_separate(values, Path(tmp))
         summary_file = out / "summary.json"
-        if summary_file.exists():
-            summary = json.loads(summary_file.read_text())
+        summary = json.loads(summary_file.read_text()) if summary_file.exists() else {}
+        if summary:
             rate = summary["ticks_per_s"] or 0.0
             mean = summary["mean_steps"]
             print(f"run_all: {summary['exit_reason']}: {summary['trials']} trials, mean steps "
                   f"{mean if mean is None else round(mean, 1)}, {summary['ticks']} ticks, "
                   f"{rate:.0f} ticks/s" + (f"; results in {args.out}" if args.out else ""))
-    if status == 130 or status == 128 + signal.SIGTERM:
+    if status in (128 + signal.SIGINT, 128 + signal.SIGTERM):
         print("run_all: interrupted", file=sys.stderr)
     elif status != 0:
-        print(f"run_all: error: the graph failed (exit status {status})", file=sys.stderr)
+        reason = summary.get("exit_reason") or f"the trial manager exited with status {status}"
+        print(f"run_all: error: {reason}", file=sys.stderr)
     return status
 
 

@@ -22,9 +22,9 @@ from typing import Callable
 from .. import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
 
 import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from std_msgs.msg import String
@@ -113,6 +113,9 @@ class GraphNode(Node):
         if event.event == TrialEvent.EPISODE_END:
             self.finish(0)
 
+    def interrupted(self) -> None:
+        """Called once after Ctrl-C or SIGTERM, before the node is destroyed."""
+
     def finish(self, exit_code: int) -> None:
         if not self.finished.done():
             self.finished.set_result(exit_code)
@@ -154,15 +157,32 @@ def convert_setting(name: str, value):
 
 
 def make_executor(context=None):
-    """rclpy's EventsExecutor: the fastest executor measured here (docs/ROS_GRAPH.md)."""
+    """rclpy's EventsExecutor, the fastest executor measured here (docs/ROS_GRAPH.md,
+    docs/benchmark_graph.md); CLNN_ROS_EXECUTOR=single selects SingleThreadedExecutor instead
+    (for comparison), CLNN_ROS_EXECUTOR=events (the default) the EventsExecutor."""
+    choice = os.environ.get("CLNN_ROS_EXECUTOR", "events").strip().lower() or "events"
+    if choice == "single":
+        from rclpy.executors import SingleThreadedExecutor
+        return SingleThreadedExecutor(context=context)
+    if choice != "events":
+        raise ValueError(f"CLNN_ROS_EXECUTOR must be 'single' or 'events', got {choice!r}")
     from rclpy.experimental import EventsExecutor
     return EventsExecutor(context=context)
 
 
-def spin_until_finished(executor, finished: Future, context=None) -> None:
-    """Spin until `finished` is done or rclpy shuts down (Ctrl-C). EventsExecutor's own
-    spin_until_future_complete does not return when a callback completes the future."""
-    while not finished.done() and rclpy.ok(context=context):
+def catch_signals() -> list[int]:
+    """Record SIGINT and SIGTERM instead of raising: the spin loop then ends between two
+    callbacks, never inside one (a publish on a context that is shutting down fails)."""
+    received = []
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda number, _frame: received.append(number))
+    return received
+
+
+def spin_until_finished(executor, finished: Future, signals: list[int]) -> None:
+    """Spin until `finished` is done or a signal arrived. (EventsExecutor's own
+    spin_until_future_complete does not return when a callback completes the future.)"""
+    while not finished.done() and not signals:
         executor.spin_once(timeout_sec=0.1)
 
 
@@ -170,22 +190,21 @@ def node_main(factory: Callable[[], GraphNode], argv: list[str] | None = None) -
     """Run one node in its own process until the episode ends; returns the exit status.
     Bad parameters: one error line, exit 2. SIGINT/SIGTERM: clean shutdown, 130/143."""
     argv = sys.argv if argv is None else argv
-    received = []
-    for signum in (signal.SIGINT, signal.SIGTERM):  # rclpy's handler chains to these
-        signal.signal(signum, lambda number, _frame: received.append(number))
-    rclpy.init(args=argv)
+    signals = catch_signals()
+    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     try:
         node = factory()
         executor = make_executor()
         executor.add_node(node)
-        spin_until_finished(executor, node.finished)
-        return node.finished.result() if node.finished.done() else 128 + signal.SIGINT
+        spin_until_finished(executor, node.finished, signals)
+        if signals:
+            node.interrupted()
+            return 128 + signals[0]
+        return node.finished.result()
     except ParamError as error:
         print(f"{os.path.basename(argv[0])}: error: {error}", file=sys.stderr)
         return 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        return 128 + (received[0] if received else signal.SIGINT)
     finally:
         if node is not None:
             node.destroy_node()
@@ -213,6 +232,3 @@ class TickJoin:
                 inbox, self.inbox = self.inbox, {}
                 self.tick += 1
                 self.complete(inbox)
-
-    def receiver(self, topic: str) -> Callable:
-        return lambda msg: self.offer(topic, msg)

@@ -55,10 +55,10 @@ class EnvironmentNode(GraphNode):
             self._offer("start", event)
 
     def on_action(self, action: Action) -> None:
-        if action.tick + 1 != self.tick:
-            self.refuse(ACTION, action, f"expected the action of tick {self.tick - 1}")
-        elif action.force_direction not in (-1, 0, 1):
+        if action.force_direction not in (-1, 0, 1):
             self.refuse(ACTION, action, f"force_direction {action.force_direction} is not -1, 0 or 1")
+        elif action.tick + 1 != self.tick:
+            self.refuse(ACTION, action, f"expected the action of tick {self.tick - 1}")
         elif (action.force_direction == 0) != self.trial_over:
             self.refuse(ACTION, action, "force_direction 0 is only for the last tick of a trial"
                         if action.force_direction == 0 else "the trial is over: no force applies")

@@ -41,6 +41,8 @@ class TrialManagerNode(GraphNode):
         _, self.angles = seed_setup(self.settings["seed"], self.params)
         self.results = []  # (trial, initial angle, steps, end reason)
         self.final_weights = None
+        self.weights_tick = None
+        self.last_trial_tick = None  # set when the last trial is over
         self.trial = 0
         self.started_at = None
         self.ready = set()
@@ -68,6 +70,14 @@ class TrialManagerNode(GraphNode):
 
     def on_weights(self, msg: WeightSnapshot) -> None:
         self.final_weights = np.array(msg.weights).reshape(msg.neurons, msg.segments, msg.inputs)
+        self.weights_tick = msg.tick
+        self.finish_when_weights_arrive()
+
+    def finish_when_weights_arrive(self) -> None:
+        """The episode is complete once the agent's weights after the last trial are in (they
+        travel on their own topic, so they may arrive after the last action)."""
+        if self.last_trial_tick is not None and self.weights_tick == self.last_trial_tick:
+            self.stop(0, "completed", self.last_trial_tick)
 
     def check(self) -> None:
         """Start once every node is ready; afterwards watch for a stall."""
@@ -83,7 +93,8 @@ class TrialManagerNode(GraphNode):
                 self.stop(1, f"graph not ready after {STARTUP_TIMEOUT_S:.0f} s: "
                              f"waiting for {', '.join(missing)}")
         elif now - self.last_progress > self.settings["stall_timeout_s"]:
-            silent = next(node for topic, node in CHAIN if self.last_tick[topic] < self.join.tick)
+            silent = next((node for topic, node in CHAIN if self.last_tick[topic] < self.join.tick),
+                          "agent")  # all of the tick is in: only the final weights are missing
             self.stop(1, f"stall: node '{silent}' went silent at tick {self.join.tick} "
                          f"(no progress for {self.settings['stall_timeout_s']:g} s)")
 
@@ -117,7 +128,8 @@ class TrialManagerNode(GraphNode):
             self.trial += 1
             self.start_trial(tick + 1)
         else:
-            self.stop(0, "completed", tick)
+            self.last_trial_tick = tick
+            self.finish_when_weights_arrive()
 
     def report(self, tick: int) -> None:
         if not self.settings["progress"]:
@@ -126,6 +138,11 @@ class TrialManagerNode(GraphNode):
         rate = tick / max(time.monotonic() - self.started_at, 1e-9)
         print(f"trial {len(steps):4d}/{len(self.angles)}  steps {steps[-1]:6d}  "
               f"mean {np.mean(steps):8.1f}  {rate:7.0f} ticks/s", flush=True)
+
+    def interrupted(self) -> None:
+        """Ctrl-C: keep what the run did so far."""
+        self.exit_reason = "interrupted"
+        self.write_results(self.join.tick)
 
     def stop(self, exit_code: int, reason: str, tick: int | None = None) -> None:
         """End the episode: tell every node, write the results, finish with `exit_code`."""

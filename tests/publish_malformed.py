@@ -1,0 +1,41 @@
+"""Publishes malformed messages into a running graph (used by test_graph.py): spike vectors of
+the wrong size, with a wrong tick or not 1-hot, impossible actions and inconsistent rewards.
+Waits until the graph's subscribers are there, sends them over about two seconds, exits 0."""
+
+import time
+
+from clnn_ros import rosenv  # noqa: F401
+
+import rclpy
+from clnn_ros_msgs.msg import Action, Reward, SpikeVector
+
+from clnn_ros.nodes.common import ACTION, LOCKSTEP_QOS, REWARD, SPIKES
+
+BAD = [
+    (SpikeVector, SPIKES, dict(tick=0, spikes=[1, 0, 0, 0, 0, 0, 0, 0])),  # 8 inputs, not 6
+    (SpikeVector, SPIKES, dict(tick=10**9, spikes=[0, 0, 1, 0, 0, 0])),  # a future tick
+    (SpikeVector, SPIKES, dict(tick=0, spikes=[1, 1, 0, 0, 0, 0])),  # two angle intervals
+    (Action, ACTION, dict(tick=0, force_direction=7)),
+    (Reward, REWARD, dict(tick=0, kind="jackpot", reward_one_hot=[1, 1])),
+]
+
+
+def main() -> None:
+    rclpy.init()
+    node = rclpy.create_node("malformed_publisher")
+    publishers = {topic: node.create_publisher(kind, topic, LOCKSTEP_QOS) for kind, topic, _ in BAD}
+    deadline = time.monotonic() + 30
+    while any(p.get_subscription_count() < 2 for p in publishers.values()):
+        assert time.monotonic() < deadline, "the graph did not come up"
+        time.sleep(0.05)
+    time.sleep(0.5)  # the episode is running
+    for _ in range(10):
+        for kind, topic, fields in BAD:
+            publishers[topic].publish(kind(**fields))
+        time.sleep(0.2)
+    node.destroy_node()
+    rclpy.shutdown()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,162 @@
+"""The real ROS 2 graph (real processes, real DDS on loopback) against the core: equal results,
+stall detection, refused messages, bad parameters and Ctrl-C."""
+
+from __future__ import annotations
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from clnn_ros.core.episode import run_episode
+from clnn_ros.core.params import Params
+
+DOMAIN_ID = str(100 + os.getpid() % 50)
+
+
+@pytest.fixture(scope="module")
+def ros_env(tmp_path_factory):
+    return {**os.environ, "ROS_DOMAIN_ID": DOMAIN_ID, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+            "ROS_LOG_DIR": str(tmp_path_factory.mktemp("ros_log"))}
+
+
+def run_all(env, *args, timeout=120):
+    return subprocess.run([sys.executable, "-m", "clnn_ros.run_all", "--quiet", *args], env=env,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def read_steps(out: Path) -> list[int]:
+    with open(out / "trials.csv") as f:
+        return [int(row["steps"]) for row in csv.DictReader(f)]
+
+
+@pytest.mark.parametrize("composed", [False, True], ids=["processes", "composed"])
+@pytest.mark.parametrize("nsv, options", [(1, []), (2, ["--velocity-edge", "0.3"])],
+                         ids=["1sv", "2sv"])
+def test_graph_equals_core(ros_env, tmp_path, composed, nsv, options):
+    trials, max_steps, seed = 10, 1500, 1
+    result = run_all(ros_env, "--seed", str(seed), "--nsv", str(nsv), "--trials", str(trials),
+                     "--max-steps", str(max_steps), *options, "--out", str(tmp_path),
+                     *(["--composed"] if composed else []))
+    assert result.returncode == 0, result.stderr
+    edge = float(options[1]) if options else 5.0
+    core = run_episode(seed, Params(nsv=nsv, trials=trials, max_steps=max_steps,
+                                    velocity_edge=edge))
+    assert read_steps(tmp_path) == core.steps.tolist()
+    np.testing.assert_array_equal(np.load(tmp_path / "final_weights.npy"), core.final_weights)
+    assert "completed: 10 trials" in result.stdout
+
+
+def test_killed_node_is_named_and_the_graph_stops(ros_env, tmp_path):
+    marker = {**ros_env, "CLNN_TEST_RUN": str(tmp_path)}
+    process = subprocess.Popen(
+        [sys.executable, "-m", "clnn_ros.run_all", "--seed", "1", "--trials", "400",
+         "--stall-timeout", "2", "--out", str(tmp_path)], env=marker,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert "trial" in wait_for_line(process.stdout, "trial    2/")
+    agent = subprocess.run(["pgrep", "-P", str(process.pid), "-f", "clnn_ros.nodes.agent"],
+                           capture_output=True, text=True).stdout.split()
+    assert len(agent) == 1
+    killed_at = time.monotonic()
+    os.kill(int(agent[0]), signal.SIGKILL)
+    _, stderr = process.communicate(timeout=30)
+    assert process.returncode == 1
+    assert "stall: node 'agent' went silent" in stderr
+    assert time.monotonic() - killed_at < 2 + 6  # the timeout, plus shutting the graph down
+    assert not processes_with(marker["CLNN_TEST_RUN"])
+    assert read_steps(tmp_path)  # the trials done before the fault are written
+
+
+def test_ctrl_c_stops_everything(ros_env, tmp_path):
+    """Ctrl-C in a terminal: run_all and every node exit, none is left, and no Fast DDS shared
+    memory is left (run in a private /dev/shm so that other DDS users of the machine don't count)."""
+    marker = {**ros_env, "CLNN_TEST_RUN": str(tmp_path)}
+    report_shm = 'mount -t tmpfs tmpfs /dev/shm && "$@"; s=$?; echo "shm left: $(ls /dev/shm)"; exit $s'
+    process = subprocess.Popen(
+        ["unshare", "--mount", "bash", "-c", report_shm, "_", sys.executable, "-m",
+         "clnn_ros.run_all", "--seed", "1", "--trials", "400"],
+        env=marker, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        start_new_session=True)
+    wait_for_line(process.stdout, "trial    2/")
+    os.killpg(process.pid, signal.SIGINT)  # what a terminal does on Ctrl-C
+    stdout, stderr = process.communicate(timeout=30)
+    assert process.returncode == 130, stderr
+    assert "run_all: interrupted" in stderr and "Traceback" not in stderr
+    assert "shm left:" in stdout and "fastrtps" not in stdout.split("shm left:")[1]
+    assert not processes_with(marker["CLNN_TEST_RUN"])
+
+
+def test_malformed_messages_are_refused(ros_env, tmp_path):
+    """Hostile messages on the agent's and environment's inputs during an episode: all are
+    refused with a reason and the episode equals the core's."""
+    script = Path(__file__).with_name("publish_malformed.py")
+    process = subprocess.Popen(
+        [sys.executable, "-m", "clnn_ros.run_all", "--quiet", "--seed", "2", "--trials", "12",
+         "--max-steps", "1500", "--out", str(tmp_path)], env=ros_env, stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, text=True)
+    fuzzer = subprocess.run([sys.executable, str(script)], env=ros_env, capture_output=True,
+                            text=True, timeout=60)
+    _, stderr = process.communicate(timeout=120)
+    assert fuzzer.returncode == 0, fuzzer.stderr
+    assert process.returncode == 0, stderr
+    for reason in ("spikes, the network has 6 inputs", "expected tick", "not a 1-hot code",
+                   "force_direction 7 is not -1, 0 or 1", "kind 'jackpot'"):
+        assert reason in stderr
+    core = run_episode(2, Params(trials=12, max_steps=1500))
+    assert read_steps(tmp_path) == core.steps.tolist()
+    np.testing.assert_array_equal(np.load(tmp_path / "final_weights.npy"), core.final_weights)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--option", "sigma=-1"], "sigma must be a positive integer"),
+    (["--nsv", "3"], "nsv must be one of 1, 2"),
+    (["--physics", "quantum"], "physics must be one of"),
+    (["--option", "wmax=9"], "unknown parameter 'wmax'"),
+    (["--stall-timeout", "-1"], "stall_timeout_s must be a number >= 0"),
+])
+def test_bad_parameters_stop_before_any_node_starts(ros_env, args, message):
+    result = run_all(ros_env, *args, timeout=30)
+    assert result.returncode == 2
+    assert message in result.stderr and "Traceback" not in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_a_node_with_a_bad_parameter_exits_with_one_line(ros_env):
+    result = subprocess.run([sys.executable, "-m", "clnn_ros.nodes.agent", "--ros-args", "-p",
+                             "omega:=-5"], env=ros_env, capture_output=True, text=True, timeout=30)
+    assert result.returncode == 2
+    assert result.stderr.strip() == "agent.py: error: omega must be a positive integer, got -5"
+
+
+def wait_for_line(stream, text: str, timeout: float = 60.0) -> str:
+    found = []
+
+    def read():
+        for line in stream:
+            if text in line:
+                found.append(line)
+                return
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    reader.join(timeout)
+    assert found, f"no line with {text!r} within {timeout} s"
+    return found[0]
+
+
+def processes_with(marker: str) -> list[int]:
+    """Processes whose environment holds CLNN_TEST_RUN=marker (run_all and the nodes it starts)."""
+    found = []
+    for environ in Path("/proc").glob("[0-9]*/environ"):
+        try:
+            if f"CLNN_TEST_RUN={marker}\0".encode() in environ.read_bytes():
+                found.append(int(environ.parent.name))
+        except OSError:
+            pass  # the process ended meanwhile
+    return found
