@@ -4,6 +4,8 @@ episode and print a summary.
     python -m clnn_ros.run_all                       # the demonstration (about a minute)
     python -m clnn_ros.run_all --seed 1 --nsv 1 --trials 32 --out DIR
     python -m clnn_ros.run_all --composed            # all nodes in one process, one executor
+    python -m clnn_ros.run_all --env gymnasium       # gymnasium's CartPole-v1 physics
+    python -m clnn_ros.run_all --env-node "python examples/noisy_cartpole.py"  # your own node
 
 Each node runs as its own process (`python -m clnn_ros.nodes.<name>`) with the same parameters
 YAML; DDS discovery stays on loopback unless ROS_AUTOMATIC_DISCOVERY_RANGE says otherwise.
@@ -14,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import signal
 import subprocess
 import sys
@@ -34,12 +37,16 @@ from .nodes.common import (RUN_SETTINGS, catch_signals, convert_setting, make_ex
                            spin_until_finished)
 from .nodes.encoder import EncoderNode
 from .nodes.environment import EnvironmentNode
+from .nodes.gymnasium_env import GymnasiumEnvironmentNode
 from .nodes.reward import RewardNode
 from .nodes.trial_manager import TrialManagerNode
 
 NODES = ("environment", "encoder", "reward", "agent", "trial_manager")
 # The demonstration: seed 0 goes from 32 steps to the 10,000 cap by trial 11 (about 80k ticks).
 DEMO = dict(seed=0, trials=20, nsv=1)
+# --env: the environment node (docs/ENV_CONTRACT.md): module and class for composed mode.
+ENVIRONMENTS = {"cartpole": ("clnn_ros.nodes.environment", EnvironmentNode),
+                "gymnasium": ("clnn_ros.nodes.gymnasium_env", GymnasiumEnvironmentNode)}
 SHUTDOWN_GRACE_S = 5.0  # how long nodes get to exit after the episode ends or Ctrl-C
 
 
@@ -57,6 +64,12 @@ def parse_args(argv):
                         help="a ROS 2 parameters YAML (/**: ros__parameters: ...); options win")
     parser.add_argument("--composed", action="store_true",
                         help="all nodes in one process with one executor")
+    parser.add_argument("--env", choices=tuple(ENVIRONMENTS), default="cartpole",
+                        help="environment node: the paper's cart-pole or gymnasium's CartPole-v1")
+    parser.add_argument("--env-node", metavar="CMD",
+                        help="run this command as the environment node instead (it gets "
+                             "--ros-args --params-file <the run's params> appended; it must keep "
+                             "docs/ENV_CONTRACT.md)")
     parser.add_argument("--out", type=Path, help="write trials.csv, final_weights.npy, summary.json")
     parser.add_argument("--stall-timeout", type=float, default=RUN_SETTINGS["stall_timeout_s"],
                         help="seconds without progress before the graph is declared stalled")
@@ -102,14 +115,15 @@ def read_params_file(path: Path) -> dict:
     return merged
 
 
-def run_separate(values: dict, workdir: Path) -> int:
+def run_separate(values: dict, workdir: Path, env_command: list[str]) -> int:
     params_file = workdir / "params.yaml"
     params_file.write_text(yaml.safe_dump({"/**": {"ros__parameters": values}}))
     processes = {}
     for name in NODES:
+        command = env_command if name == "environment" else \
+            [sys.executable, "-m", f"clnn_ros.nodes.{name}"]
         processes[name] = subprocess.Popen(
-            [sys.executable, "-m", f"clnn_ros.nodes.{name}", "--ros-args", "--params-file",
-             str(params_file), "--log-level", "warn"])
+            [*command, "--ros-args", "--params-file", str(params_file), "--log-level", "warn"])
     interrupted = catch_signals()
     try:
         while processes["trial_manager"].poll() is None and not interrupted:
@@ -139,12 +153,12 @@ def stop_all(processes: dict) -> None:
                 process.wait()
 
 
-def run_composed(values: dict) -> int:
+def run_composed(values: dict, environment=EnvironmentNode) -> int:
     signals = catch_signals()
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     nodes = []
     try:
-        nodes = [cls(overrides=values) for cls in (EnvironmentNode, EncoderNode, RewardNode,
+        nodes = [cls(overrides=values) for cls in (environment, EncoderNode, RewardNode,
                                                    AgentNode, TrialManagerNode)]
         executor = make_executor()
         for node in nodes:
@@ -168,13 +182,24 @@ def main(argv=None) -> int:
     except ParamError as error:
         print(f"run_all: error: {error}", file=sys.stderr)
         return 2
+    module, environment = ENVIRONMENTS[args.env]
+    env_command = [sys.executable, "-m", module]
+    if args.env_node is not None:
+        env_command = shlex.split(args.env_node)
+        if not env_command or args.composed:
+            print("run_all: error: --env-node needs a command" if not env_command else
+                  "run_all: error: --env-node runs its own process: not with --composed",
+                  file=sys.stderr)
+            return 2
     with tempfile.TemporaryDirectory(prefix="clnn_ros_") as tmp:
         out = args.out or Path(tmp) / "out"
         values["out_dir"] = str(out.resolve())
         mode = "composed (one process)" if args.composed else f"{len(NODES)} processes"
         print(f"run_all: seed {values['seed']}, {values['trials']} trials, {values['nsv']} SV, "
-              f"{mode}", flush=True)
-        status = run_composed(values) if args.composed else run_separate(values, Path(tmp))
+              f"{mode}" + (f", environment: {args.env_node or args.env}"
+                           if args.env_node or args.env != "cartpole" else ""), flush=True)
+        status = run_composed(values, environment) if args.composed else \
+            run_separate(values, Path(tmp), env_command)
         summary_file = out / "summary.json"
         summary = json.loads(summary_file.read_text()) if summary_file.exists() else {}
         if summary:

@@ -78,13 +78,15 @@ def run_trial(agent: RLNAgent, counter: SuccessCounter, env: CartPole, encoder: 
 
 
 def run_episode(seed: int, p: Params, weights: np.ndarray | None = None, learn: bool = True,
-                angles: np.ndarray | None = None) -> EpisodeResult:
-    """One episode with the seed protocol; `weights`/`angles` override the seed's own."""
+                angles: np.ndarray | None = None,
+                env_factory: Callable[[Params], CartPole] = CartPole) -> EpisodeResult:
+    """One episode with the seed protocol; `weights`/`angles` override the seed's own;
+    `env_factory(p)` makes the environment (e.g. core.gym_physics.GymCartPole)."""
     seed_weights, seed_angles = seed_setup(seed, p)
     weights = seed_weights if weights is None else weights
     angles = seed_angles if angles is None else np.asarray(angles, dtype=np.float64)
     agent = RLNAgent(p, weights, seed=seed)
-    counter, env, encoder = SuccessCounter(p), CartPole(p), Encoder.from_params(p)
+    counter, env, encoder = SuccessCounter(p), env_factory(p), Encoder.from_params(p)
     steps = np.zeros(len(angles), dtype=np.int64)
     status = np.zeros(len(angles), dtype=np.int64)
     for trial, angle in enumerate(angles):

@@ -15,6 +15,7 @@ TIE_BREAKS = ("exact", "index", "random")
 TAGGING = ("winner", "both_neurons")
 E_FLAGS = ("latched", "live")
 SUCCESS_COUNTER = ("per_trial", "carry")
+ANGLE_EDGES_DEG = (-6.0, -1.0, 0.0, 1.0, 6.0)  # Table 1 interior angle edges, deg
 
 
 class ParamError(ValueError):
@@ -43,7 +44,8 @@ class Params:
     n_angles: int = 32  # initial angles evenly spaced over [-angle_span_deg, +angle_span_deg]
     angle_span_deg: float = 1.5
 
-    # Encoder (Table 1): angle intervals are fixed by the table, the velocity edge is open.
+    # Encoder (Table 1): interior interval edges. A tuple, or text "-6,-1,0,1,6" (ROS/YAML).
+    angle_edges_deg: tuple = ANGLE_EDGES_DEG  # pole angle, deg: len + 1 inputs (Table 1: 6)
     velocity_edge: float = 5.0  # |dx/dt| edge between the 3 velocity intervals, m/s
 
     # Environment (section 1.2).
@@ -69,8 +71,9 @@ class Params:
     n_segments: int = field(init=False)
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "angle_edges_deg", parse_edges(self.angle_edges_deg))
         self.validate()
-        object.__setattr__(self, "n_inputs", 6 if self.nsv == 1 else 9)
+        object.__setattr__(self, "n_inputs", len(self.angle_edges_deg) + 1 + 3 * (self.nsv == 2))
         object.__setattr__(self, "n_segments", self.segments or (3 if self.nsv == 1 else 9))
 
     def validate(self) -> None:
@@ -111,6 +114,12 @@ class Params:
         if self.angle_span_deg >= self.angle_limit_deg:
             raise ParamError(f"angle_span_deg ({self.angle_span_deg:g}) must be below "
                              f"angle_limit_deg ({self.angle_limit_deg:g})")
+        edges = self.angle_edges_deg
+        if any(b <= a for a, b in zip(edges, edges[1:])):
+            raise ParamError(f"angle_edges_deg must be strictly increasing, got {list(edges)}")
+        if not all(abs(e) < self.angle_limit_deg for e in edges):
+            raise ParamError(f"angle_edges_deg must lie inside +-angle_limit_deg "
+                             f"({self.angle_limit_deg:g}), got {list(edges)}")
         if self.max_steps >= 2**31:
             raise ParamError(f"max_steps must be < 2**31, got {self.max_steps}")
 
@@ -135,6 +144,25 @@ def _choice(name: str, value, allowed: tuple, meaning: str | None = None) -> Non
                          + f", got {value!r}")
 
 
+def parse_edges(value) -> tuple[float, ...]:
+    """Interior interval edges from a tuple/list of numbers or text "-6,-1,0,1,6" (brackets
+    allowed): a tuple of at least one finite float, else one ParamError line."""
+    items = value
+    if isinstance(value, str):
+        text = value.strip().removeprefix("[").removesuffix("]")
+        items = [t for t in text.replace(" ", ",").split(",") if t]
+    try:
+        if not isinstance(items, (list, tuple)) or any(isinstance(e, bool) for e in items):
+            raise ValueError
+        edges = tuple(float(e) for e in items)
+    except (TypeError, ValueError):
+        raise ParamError(f"angle_edges_deg must be numbers separated by commas, "
+                         f"got {value!r}") from None
+    if not edges or not all(math.isfinite(e) for e in edges):
+        raise ParamError(f"angle_edges_deg must be one or more finite numbers, got {value!r}")
+    return edges
+
+
 def params_from_strings(values: dict[str, str], base: Params | None = None) -> Params:
     """Params from text values (command line, ROS parameters, YAML), each converted to the
     type of its field; a value that does not convert is one clear ParamError line."""
@@ -147,7 +175,9 @@ def params_from_strings(values: dict[str, str], base: Params | None = None) -> P
         default = current[name]
         kind = int if name in ("segments",) or isinstance(default, int) else type(default)
         try:
-            if isinstance(text, kind) and not isinstance(text, bool):
+            if kind is tuple:
+                converted[name] = text  # Params parses and validates it
+            elif isinstance(text, kind) and not isinstance(text, bool):
                 converted[name] = text
             elif kind is int:
                 converted[name] = int(str(text), 10)

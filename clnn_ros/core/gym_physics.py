@@ -1,0 +1,68 @@
+"""Gymnasium's CartPole-v1 physics behind the core's environment interface (CartPole's reset,
+step and state), so that the core, the batch-engine comparison and the gymnasium environment
+node (clnn_ros/nodes/gymnasium_env.py) all drive the very same simulator.
+
+Gymnasium's own constants apply (masscart 1.0 kg, masspole 0.1 kg, half-length 0.5 m, g 9.8,
+force 10 N, tau 0.02 s, explicit Euler, fails beyond 12 deg = 0.2095 rad or 2.4 m); the
+model's Params do not change them. Gymnasium keeps the state in radians (float64); the state
+seen by the encoder and published on /cartpole/state is in degrees: math.degrees(rad).
+
+    env = GymCartPole(); env.reset(0.5); status = env.step(1); x, x_dot, th_deg, thd_deg = env.state
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .physics import CONTINUE, FAIL_ANGLE, FAIL_POSITION
+
+
+def make_gym_cartpole():
+    """gymnasium.make("CartPole-v1").unwrapped (no TimeLimit: the trial's cap is max_steps)."""
+    import gymnasium  # imported here: the rest of the core does not need it
+
+    return gymnasium.make("CartPole-v1").unwrapped
+
+
+class GymCartPole:
+    """Gymnasium's CartPole-v1 with the core's interface: reset(angle_deg), step(0|1) -> status,
+    state = (x m, x_dot m/s, theta deg, theta_dot deg/s)."""
+
+    def __init__(self, params=None):  # params accepted (and unused) for CartPole's signature
+        self.env = make_gym_cartpole()
+        self.tau = self.env.tau
+        self.angle_limit_deg = math.degrees(self.env.theta_threshold_radians)
+        self.track_limit_m = self.env.x_threshold
+        self.state = (0.0, 0.0, 0.0, 0.0)
+
+    def reset(self, initial_angle_deg: float) -> tuple:
+        """Trial start: cart centred and at rest, pole at rest at the angle (set directly)."""
+        self.env.state = np.array((0.0, 0.0, math.radians(initial_angle_deg), 0.0),
+                                  dtype=np.float64)
+        self.env.steps_beyond_terminated = None
+        self._read_state()
+        return self.state
+
+    def step(self, action: int) -> int:
+        """Action 0 pushes with -10 N, 1 with +10 N (gymnasium's own step); the status says
+        which limit a terminated step crossed (the angle is checked first, as in the core)."""
+        _, _, terminated, _, _ = self.env.step(int(action))
+        self._read_state()
+        if not terminated:
+            return CONTINUE
+        x, _, theta, _ = self.env.state
+        return FAIL_ANGLE if abs(theta) > self.env.theta_threshold_radians else FAIL_POSITION
+
+    def _read_state(self) -> None:
+        x, x_dot, theta, theta_dot = (float(v) for v in self.env.state)
+        self.state = (x, x_dot, math.degrees(theta), math.degrees(theta_dot))
+
+
+def gym_matched_params(p):
+    """The Params that make the core's own physics the same model as gymnasium's CartPole-v1
+    (used to run the batch engine on gymnasium's physics)."""
+    return p.replace(cart_mass=1.0, pole_mass=0.1, pole_length=0.5, gravity=9.8, force=10.0,
+                     tau=0.02, physics="correct", integrator="euler", angle_limit_deg=12.0,
+                     track_limit_m=2.4)
