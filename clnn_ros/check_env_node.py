@@ -459,6 +459,8 @@ def main(argv: list[str] | None = None) -> int:
     if not args.command:
         parser.error("give the environment node's command, e.g. python -m "
                      "clnn_ros.nodes.environment")
+    if args.command[0] in ("python", "python3"):  # the interpreter (venv) of the checker
+        args.command[0] = sys.executable
     if not 0 <= args.domain_id <= 232:
         parser.error("--domain-id must be 0..232")
     with tempfile.TemporaryDirectory(prefix="check_env_node_") as tmp:

@@ -69,7 +69,7 @@ def parse_args(argv):
     parser.add_argument("--env-node", metavar="CMD",
                         help="run this command as the environment node instead (it gets "
                              "--ros-args --params-file <the run's params> appended; it must keep "
-                             "docs/ENV_CONTRACT.md)")
+                             "docs/ENV_CONTRACT.md; a leading 'python' is run_all's interpreter)")
     parser.add_argument("--out", type=Path, help="write trials.csv, final_weights.npy, summary.json")
     parser.add_argument("--stall-timeout", type=float, default=RUN_SETTINGS["stall_timeout_s"],
                         help="seconds without progress before the graph is declared stalled")
@@ -186,6 +186,8 @@ def main(argv=None) -> int:
     env_command = [sys.executable, "-m", module]
     if args.env_node is not None:
         env_command = shlex.split(args.env_node)
+        if env_command[:1] in (["python"], ["python3"]):  # the interpreter (venv) of run_all
+            env_command[0] = sys.executable
         if not env_command or args.composed:
             print("run_all: error: --env-node needs a command" if not env_command else
                   "run_all: error: --env-node runs its own process: not with --composed",

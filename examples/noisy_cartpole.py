@@ -1,0 +1,101 @@
+"""A cart-pole with friction and a noisy actuator, written only against docs/ENV_CONTRACT.md
+(rclpy and the message packages, no clnn_ros code).
+    python -m clnn_ros.run_all --env-node "python examples/noisy_cartpole.py"
+    python -m clnn_ros.check_env_node python examples/noisy_cartpole.py --ros-args -p force_noise:=0.2
+"""
+import math, random
+import rclpy
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from std_msgs.msg import String
+from clnn_ros_msgs.msg import Action, CartPoleState, TrialEvent
+
+LOCKSTEP = QoSProfile(depth=64, reliability=ReliabilityPolicy.RELIABLE)  # KEEP_LAST, VOLATILE
+READY = QoSProfile(depth=16, reliability=ReliabilityPolicy.RELIABLE,
+                   durability=DurabilityPolicy.TRANSIENT_LOCAL)
+DEFAULTS = dict(tau=0.02, max_steps=10000, angle_limit_deg=12.0, track_limit_m=2.4, gravity=9.8,
+                cart_mass=0.711, pole_mass=0.209, pole_length=0.326, force=10.0,  # contract's
+                cart_friction=0.0005, pole_friction=2e-6, force_noise=0.1, noise_seed=0)  # own
+
+
+class NoisyCartPole(Node):
+    def __init__(self):
+        super().__init__("environment", automatically_declare_parameters_from_overrides=True)
+        self.p = {k: self.get_parameter_or(k, rclpy.Parameter(k, value=v)).value
+                  for k, v in DEFAULTS.items()}
+        self.rng, self.tau_ns = random.Random(self.p["noise_seed"]), round(self.p["tau"] * 1e9)
+        self.tick, self.trial, self.steps, self.over, self.done = 0, 0, 0, True, False
+        self.pending, self.s = {}, [0.0, 0.0, 0.0, 0.0]  # x m, dx/dt m/s, theta rad, rad/s
+        self.pub = self.create_publisher(CartPoleState, "/cartpole/state", LOCKSTEP)
+        self.ready = self.create_publisher(String, "/graph/ready", READY)
+        self.timer = self.create_timer(0.02, self.announce)
+        self.create_subscription(Clock, "/clock", self.on_clock, LOCKSTEP)
+        self.create_subscription(TrialEvent, "/trial/event", self.on_event, LOCKSTEP)
+        self.create_subscription(Action, "/rln/action", self.on_action, LOCKSTEP)
+
+    def announce(self):  # encoder, reward and trial manager subscribe to the state
+        if self.pub.get_subscription_count() >= 3:
+            self.ready.publish(String(data="environment")), self.timer.cancel()
+
+    def refuse(self, why):
+        self.get_logger().error(f"refused at tick {self.tick}: {why}")
+
+    def on_clock(self, m):
+        ns = m.clock.sec * 10**9 + m.clock.nanosec
+        self.offer("clock", m) if ns == self.tick * self.tau_ns else self.refuse(f"clock {ns} ns")
+
+    def on_event(self, e):
+        if e.event == TrialEvent.EPISODE_END:
+            self.done = True
+        elif e.event == TrialEvent.START:
+            ok = e.tick == self.tick and self.over and abs(e.initial_angle_deg) < self.p["angle_limit_deg"]
+            self.offer("start", e) if ok else self.refuse(f"START {e.tick} {e.initial_angle_deg}")
+
+    def on_action(self, a):
+        d = a.force_direction
+        if d not in (-1, 0, 1) or a.tick + 1 != self.tick or (d == 0) != self.over:
+            self.refuse(f"action {a.tick} force_direction {d}")
+        elif d:
+            self.offer("action", a)
+
+    def offer(self, key, msg):
+        if key in self.pending:
+            return self.refuse(f"a second {key}")
+        self.pending[key] = msg
+        if "clock" in self.pending and len(self.pending) == 2:
+            start, action, self.pending, reason = self.pending.get("start"), self.pending.get("action"), {}, ""
+            if start:
+                self.trial, self.steps, self.s = start.trial, 0, [0.0, 0.0, math.radians(start.initial_angle_deg), 0.0]
+            else:
+                reason = self.physics(action.force_direction * self.p["force"] * (1 + self.p["force_noise"] * self.rng.gauss(0, 1)))
+                self.steps += not reason
+            self.over = bool(reason) or self.steps >= self.p["max_steps"]
+            x, xd, th, thd = self.s
+            m = CartPoleState(cart_position_m=x, cart_velocity_m_per_s=xd, pole_angle_deg=math.degrees(th),
+                              pole_angular_velocity_deg_per_s=math.degrees(thd), failed=bool(reason),
+                              failure_reason=reason, successful_steps=self.steps, tick=self.tick, trial=self.trial)
+            m.header.stamp.sec, m.header.stamp.nanosec = divmod(self.tick * self.tau_ns, 10**9)
+            self.pub.publish(m)
+            self.tick += 1
+
+    def physics(self, f):  # Barto et al. (1983) with cart and pole friction, semi-implicit Euler
+        p, (x, xd, th, thd) = self.p, self.s
+        mt, ml, sin, cos = p["cart_mass"] + p["pole_mass"], p["pole_mass"] * p["pole_length"], math.sin(th), math.cos(th)
+        tmp = (f + ml * thd * thd * sin - p["cart_friction"] * math.copysign(1, xd)) / mt
+        tha = (p["gravity"] * sin - cos * tmp - p["pole_friction"] * thd / ml) / (p["pole_length"] * (4 / 3 - p["pole_mass"] * cos * cos / mt))
+        xd += p["tau"] * (tmp - ml * tha * cos / mt)
+        thd += p["tau"] * tha
+        self.s = [x + p["tau"] * xd, xd, th + p["tau"] * thd, thd]
+        return "pole_angle" if abs(math.degrees(self.s[2])) > p["angle_limit_deg"] else "cart_position" if abs(self.s[0]) > p["track_limit_m"] else ""
+
+
+rclpy.init()
+node = NoisyCartPole()
+try:
+    while rclpy.ok() and not node.done:
+        rclpy.spin_once(node, timeout_sec=0.1)
+except KeyboardInterrupt:
+    pass
+node.destroy_node()
+rclpy.try_shutdown()
