@@ -35,6 +35,7 @@ from .core.params import ParamError, params_from_strings
 from .nodes.agent import AgentNode
 from .nodes.common import (RUN_SETTINGS, catch_signals, convert_setting, make_executor,
                            spin_until_finished)
+from .nodes import recorder as recorder_node
 from .nodes.encoder import EncoderNode
 from .nodes.environment import EnvironmentNode
 from .nodes.gymnasium_env import GymnasiumEnvironmentNode
@@ -74,6 +75,9 @@ def parse_args(argv):
     parser.add_argument("--stall-timeout", type=float, default=RUN_SETTINGS["stall_timeout_s"],
                         help="seconds without progress before the graph is declared stalled")
     parser.add_argument("--quiet", action="store_true", help="no per-trial progress lines")
+    parser.add_argument("--bag", type=Path, help="record every topic into this MCAP file "
+                        "(default: <out>/run.mcap with --out, else bags/run_<UTC time>.mcap)")
+    parser.add_argument("--no-record", action="store_true", help="do not record a bag")
     return parser.parse_args(argv)
 
 
@@ -196,12 +200,24 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory(prefix="clnn_ros_") as tmp:
         out = args.out or Path(tmp) / "out"
         values["out_dir"] = str(out.resolve())
+        bag_path = recorder = None
+        if not args.no_record:  # the recorder: its own process, also in composed mode
+            bag_path = args.bag or recorder_node.default_bag_path(args.out)
+            try:
+                recorder = recorder_node.launch(values, bag_path, Path(tmp))
+            except OSError as error:
+                print(f"run_all: error: cannot write the bag {bag_path}: {error}", file=sys.stderr)
+                return 2
+            values["extra_nodes"] = recorder_node.NAME
+            print(f"run_all: recording to {bag_path}", flush=True)
         mode = "composed (one process)" if args.composed else f"{len(NODES)} processes"
         print(f"run_all: seed {values['seed']}, {values['trials']} trials, {values['nsv']} SV, "
               f"{mode}" + (f", environment: {args.env_node or args.env}"
                            if args.env_node or args.env != "cartpole" else ""), flush=True)
         status = run_composed(values, environment) if args.composed else \
             run_separate(values, Path(tmp), env_command)
+        if recorder is not None:
+            recorder_node.stop(recorder, status)
         summary_file = out / "summary.json"
         summary = json.loads(summary_file.read_text()) if summary_file.exists() else {}
         if summary:
@@ -210,6 +226,8 @@ def main(argv=None) -> int:
             print(f"run_all: {summary['exit_reason']}: {summary['trials']} trials, mean steps "
                   f"{mean if mean is None else round(mean, 1)}, {summary['ticks']} ticks, "
                   f"{rate:.0f} ticks/s" + (f"; results in {args.out}" if args.out else ""))
+    if bag_path is not None:
+        print(f"run_all: bag {bag_path}", flush=True)
     if status in (128 + signal.SIGINT, 128 + signal.SIGTERM):
         print("run_all: interrupted", file=sys.stderr)
     elif status != 0:

@@ -43,9 +43,11 @@ ACTION = "/rln/action"
 WEIGHTS = "/rln/weights"
 READY = "/graph/ready"
 
-# In lockstep a publisher is never more than a few messages ahead of any subscriber (at most
-# END, EPISODE_END and START on /trial/event within one tick), so depth 64 cannot overflow.
-LOCKSTEP_QOS = QoSProfile(depth=64, reliability=ReliabilityPolicy.RELIABLE,
+# In lockstep a publisher is never more than a few messages ahead of any node of the graph (at
+# most END, EPISODE_END and START on /trial/event within one tick). A subscriber outside the
+# lockstep (the recorder, echo) may lag: the publisher's history keeps the last 2000 messages
+# for it (about 2 s of the graph), so a recorder starved of CPU for a while loses nothing.
+LOCKSTEP_QOS = QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE,
                           history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
 # A readiness announcement must reach a trial manager that starts later than the node; the
 # depth keeps every node's announcement when several arrive at once.
@@ -59,7 +61,9 @@ GRAPH_NODES = ("environment", "encoder", "reward", "agent")
 ROS_BUILTIN_PARAMETERS = {"use_sim_time", "start_type_description_service"}
 # Settings of the run that are not model parameters, with their defaults.
 RUN_SETTINGS = {"seed": 0, "stall_timeout_s": 5.0, "out_dir": "", "progress": True,
-                "init_weights": ""}
+                "init_weights": "", "extra_nodes": ""}
+# extra_nodes: comma-separated names of participants that subscribe to every topic and announce
+# on /graph/ready (the recorder): each publisher waits for them too, and so does the first tick.
 
 
 class GraphNode(Node):
@@ -78,13 +82,14 @@ class GraphNode(Node):
                                               for k, v in (overrides or {}).items()])
         self.params, self.settings = read_parameters(self)
         self.tau_ns = round(self.params.tau * 1e9)
+        self.extra_nodes = {n.strip() for n in self.settings["extra_nodes"].split(",") if n.strip()}
         self.refused = 0
         self.finished = Future()
         self._expected = []
         for attribute, (msg_type, topic, subscribers) in publishers.items():
             publisher = self.create_publisher(msg_type, topic, LOCKSTEP_QOS)
             setattr(self, attribute, publisher)
-            self._expected.append((publisher, subscribers))
+            self._expected.append((publisher, subscribers + len(self.extra_nodes)))
         self._ready_publisher = self.create_publisher(String, READY, READY_QOS)
         self._ready_timer = self.create_timer(0.02, self._announce_when_matched)
         if self.listens_to_trial_events:

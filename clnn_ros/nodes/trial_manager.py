@@ -84,12 +84,12 @@ class TrialManagerNode(GraphNode):
         now = time.monotonic()
         if self.started_at is None:
             own = all(p.get_subscription_count() >= n for p, n in self._expected)
-            if own and self.ready >= set(GRAPH_NODES):
+            if own and self.ready >= set(GRAPH_NODES) | self.extra_nodes:
                 self.started_at = self.last_progress = now
                 self.start_trial(0)
             elif now - self.last_progress > STARTUP_TIMEOUT_S:
-                missing = sorted(set(GRAPH_NODES) - self.ready) or ["(subscriptions of /clock "
-                                                                    "or /trial/event)"]
+                missing = sorted((set(GRAPH_NODES) | self.extra_nodes) - self.ready) or [
+                    "(subscriptions of /clock or /trial/event)"]
                 self.stop(1, f"graph not ready after {STARTUP_TIMEOUT_S:.0f} s: "
                              f"waiting for {', '.join(missing)}")
         elif now - self.last_progress > self.settings["stall_timeout_s"]:

@@ -1,0 +1,330 @@
+"""Recording (clnn_ros.nodes.recorder via run_all), reading the bag with two independent readers,
+faults (Ctrl-C, a killed agent, a killed recorder) and the offline analysis (clnn_ros.analyze)."""
+
+from __future__ import annotations
+
+import array
+import csv
+import math
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from clnn_ros import bag
+from clnn_ros.nodes.common import STATE, TRIAL_EVENT
+
+from test_graph import processes_with, wait_for_line
+
+DOMAIN_ID = str(150 + os.getpid() % 50)
+REPO = Path(__file__).resolve().parents[1]
+PER_TICK = ("/clock", "/cartpole/state", "/rln/spikes", "/rln/reward", "/rln/action")
+
+
+@pytest.fixture(scope="module")
+def ros_env(tmp_path_factory):
+    return {**os.environ, "ROS_DOMAIN_ID": DOMAIN_ID, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+            "ROS_LOG_DIR": str(tmp_path_factory.mktemp("ros_log"))}
+
+
+@pytest.fixture(scope="module")
+def recorded(ros_env, tmp_path_factory):
+    """One recorded run (seed 0, 12 trials, cap 2000: about 4,800 ticks) and its analysis."""
+    out = tmp_path_factory.mktemp("recorded")
+    run = subprocess.run([sys.executable, "-m", "clnn_ros.run_all", "--quiet", "--seed", "0",
+                          "--trials", "12", "--max-steps", "2000", "--out", str(out)],
+                         env=ros_env, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert f"run_all: recording to {out / 'run.mcap'}" in run.stdout
+    assert f"run_all: bag {out / 'run.mcap'}" in run.stdout
+    analysis = subprocess.run([sys.executable, "-m", "clnn_ros.analyze", str(out / "run.mcap"),
+                               "--out", str(out / "analysis")], capture_output=True, text=True,
+                              timeout=60)
+    assert analysis.returncode == 0, analysis.stderr
+    return out
+
+
+def tick_of(publish_ns: int) -> int:
+    return publish_ns // 20_000_000
+
+
+def raw_messages(path: Path, salvage=False):
+    reader, stream = bag.open_bag(path, salvage)
+    with stream:
+        return list(bag.iter_raw(reader))
+
+
+def assert_every_tick(messages, topics=PER_TICK, last_state_tick=None):
+    """Each per-tick topic holds every tick from 0 to the last state's tick, no gap."""
+    ticks = {t: sorted(tick_of(m[2]) for m in messages if m[1] == t) for t in topics}
+    last = ticks[STATE][-1] if last_state_tick is None else last_state_tick
+    assert ticks[STATE] == list(range(last + 1))
+    for topic in topics:
+        assert ticks[topic][:last] == list(range(min(last, len(ticks[topic])))), topic
+        assert len(ticks[topic]) >= last  # the last tick's later messages may be missing
+    return last
+
+
+# --- the recorded run and its analysis ---------------------------------------------------------
+
+def test_analysis_equals_the_live_run(recorded):
+    analysis = recorded / "analysis"
+    assert (analysis / "trials.csv").read_text() == (recorded / "trials.csv").read_text()
+    np.testing.assert_array_equal(np.load(analysis / "final_weights.npy"),
+                                  np.load(recorded / "final_weights.npy"))
+    for name in ("learning_curve.png", "raster.png", "traces.png", "weights.png", "summary.md"):
+        assert (analysis / name).stat().st_size > 1000, name
+    with open(analysis / "weights.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 12 * 2 * 3 * 6  # a snapshot after each trial
+    summary = (analysis / "summary.md").read_text()
+    assert "trials completed: 12; mean successful steps 396.3" in summary
+    assert "EPISODE_END, `completed`" in summary
+
+
+def test_bag_layout_is_rosbag2(recorded):
+    """Schemas, hashes, QoS and the rosbag2 metadata record, as ros2 bag writes them."""
+    from mcap.reader import make_reader
+    with open(recorded / "run.mcap", "rb") as f:
+        reader = make_reader(f)
+        assert reader.get_header().profile == "ros2"
+        summary = reader.get_summary()
+        metadata = {m.name: m.metadata for m in reader.iter_metadata()}
+    channels = {c.topic: c for c in summary.channels.values()}
+    assert set(channels) == set(bag.TOPIC_TYPES)
+    for topic, type_name in bag.TOPIC_TYPES.items():
+        channel = channels[topic]
+        schema = summary.schemas[channel.schema_id]
+        assert channel.message_encoding == "cdr" and schema.encoding == "ros2msg"
+        assert schema.name == type_name
+        assert channel.metadata["topic_type_hash"] == bag.type_hash(type_name)
+        assert channel.metadata["topic_type_hash"].startswith("RIHS01_")
+        qos = yaml.safe_load(channel.metadata["offered_qos_profiles"])
+        assert qos[0]["reliability"] == "reliable" and qos[0]["durability"] == "volatile"
+    text = summary.schemas[channels[STATE].schema_id].data.decode()
+    assert "\n" + "=" * 80 + "\nMSG: std_msgs/Header\n" in text
+    assert "\n" + "=" * 80 + "\nMSG: builtin_interfaces/Time\n" in text
+    assert summary.chunk_indexes and all(c.compression == "zstd" for c in summary.chunk_indexes)
+    info = yaml.safe_load(metadata["rosbag2"]["serialized_metadata"])
+    assert info["version"] == 9 and info["storage_identifier"] == "mcap"
+    assert info["message_count"] == summary.statistics.message_count
+    counts = {t["topic_metadata"]["name"]: t["message_count"]
+              for t in info["topics_with_message_count"]}
+    assert counts == {channels[t].topic: summary.statistics.channel_message_counts[channels[t].id]
+                      for t in channels}
+    assert '"seed": 0' in metadata["clnn_ros"]["parameters"]
+
+
+def plain(value):
+    """A decoded field as plain Python, whichever reader decoded it."""
+    if isinstance(value, (bytes, bytearray, array.array)):
+        return list(value)
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (list, tuple)):
+        return [plain(v) for v in value]
+    if hasattr(value, "__slots__") or hasattr(value, "__dataclass_fields__"):
+        return fields_of(value)
+    if isinstance(value, (np.generic,)):
+        return value.item()
+    return value
+
+
+def fields_of(msg) -> dict:
+    if hasattr(msg, "get_fields_and_field_types"):  # rclpy
+        names = list(msg.get_fields_and_field_types())
+    elif hasattr(msg, "__dataclass_fields__"):  # rosbags
+        names = [n for n in msg.__dataclass_fields__ if n != "__msgtype__"]
+    else:  # mcap_ros2
+        names = [n for n in msg.__slots__]
+    return {n: plain(getattr(msg, n)) for n in names
+            if not n.isupper() and n != "__msgtype__"}
+
+
+def test_two_independent_readers_decode_every_field(recorded):
+    """mcap_ros2 and rosbags, each from the schemas in the bag, agree field by field with the
+    installed message types on sampled messages of every topic."""
+    from mcap_ros2.reader import read_ros2_messages
+    from rclpy.serialization import deserialize_message
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+
+    from mcap.reader import make_reader
+
+    path = recorded / "run.mcap"
+    raw = {}  # (topic, sequence) -> CDR; the recorder numbers each topic's messages 0, 1, ...
+    with open(path, "rb") as f:
+        for _, channel, message in make_reader(f).iter_messages():
+            raw[(channel.topic, message.sequence)] = message.data
+            assert message.publish_time == bag.stamp_ns(message.data)
+    by_mcap = {}
+    for m in read_ros2_messages(path):
+        key = (m.channel.topic, m.sequence_count)
+        if key[1] % 97 == 3 or key[0] in ("/trial/event", "/rln/weights"):
+            by_mcap[key] = fields_of(m.ros_msg)
+    by_rosbags = {}
+    seen = {}
+    with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        for connection, _, data in reader.messages():
+            index = seen[connection.topic] = seen.get(connection.topic, -1) + 1
+            if (connection.topic, index) in by_mcap:
+                by_rosbags[(connection.topic, index)] = fields_of(
+                    reader.deserialize(data, connection.msgtype))
+    assert set(by_rosbags) == set(by_mcap)
+    assert {t for t, _ in by_mcap} == set(bag.TOPIC_TYPES)
+    for (topic, index), fields in by_mcap.items():
+        installed = fields_of(deserialize_message(raw[(topic, index)],
+                                                  bag.message_class(bag.TOPIC_TYPES[topic])))
+        assert fields == installed, (topic, index)
+        assert by_rosbags[(topic, index)] == installed, (topic, index)
+        if "tick" in fields:
+            assert fields["header"]["stamp"]["nanosec"] == fields["tick"] * 20_000_000 % 10**9
+
+
+# --- faults ------------------------------------------------------------------------------------
+
+def start_run(env, out: Path, *extra):
+    return subprocess.Popen(
+        [sys.executable, "-m", "clnn_ros.run_all", "--seed", "1", "--trials", "400",
+         "--out", str(out), *extra], env={**env, "CLNN_TEST_RUN": str(out)},
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+
+
+def child(process, module: str) -> int:
+    found = subprocess.run(["pgrep", "-P", str(process.pid), "-f", module],
+                           capture_output=True, text=True).stdout.split()
+    assert len(found) == 1, found
+    return int(found[0])
+
+
+def tool(env, module, *args, timeout=30):
+    return subprocess.run([sys.executable, "-m", module, *args], env=env, capture_output=True,
+                          text=True, timeout=timeout)
+
+
+def test_echo_topics_then_ctrl_c_leaves_a_complete_bag(ros_env, tmp_path):
+    """Against a live graph: clnn_ros.topics and clnn_ros.echo (YAML, --field, --raster, Ctrl-C,
+    an unknown topic); then Ctrl-C to the whole run leaves a finished bag."""
+    process = start_run(ros_env, tmp_path)
+    wait_for_line(process.stdout, "trial    3/")
+    listed = tool(ros_env, "clnn_ros.topics")
+    assert listed.returncode == 0
+    for topic, type_name in bag.TOPIC_TYPES.items():
+        assert f"{topic} [{type_name}]" in listed.stdout.splitlines()
+    state = tool(ros_env, "clnn_ros.echo", STATE, "--once")
+    assert state.returncode == 0 and state.stdout.endswith("\n---\n")
+    fields = yaml.safe_load(state.stdout.split("---")[0])
+    assert list(fields) == ["header", "tick", "trial", "cart_position_m", "cart_velocity_m_per_s",
+                            "pole_angle_deg", "pole_angular_velocity_deg_per_s", "failed",
+                            "failure_reason", "successful_steps"]
+    assert fields["header"]["stamp"]["nanosec"] == fields["tick"] * 20_000_000 % 10**9
+    spikes = tool(ros_env, "clnn_ros.echo", "/rln/spikes", "--once")
+    assert "\nspikes: [" in spikes.stdout and "\ninput_labels: ['pole_angle[" in spikes.stdout
+    stamp = tool(ros_env, "clnn_ros.echo", "/rln/action", "--once", "--field", "header.stamp")
+    assert list(yaml.safe_load(stamp.stdout.split("---")[0])) == ["sec", "nanosec"]
+    raster = subprocess.Popen([sys.executable, "-m", "clnn_ros.echo", "/rln/spikes", "--raster"],
+                              env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                              text=True)
+    wait_for_line(raster.stdout, "|", timeout=20)
+    line = wait_for_line(raster.stdout, "tick ", timeout=20)
+    raster.send_signal(signal.SIGINT)
+    _, raster_err = raster.communicate(timeout=10)
+    assert raster.returncode == 130 and "Traceback" not in raster_err
+    assert line.count("#") == 1 and line.rstrip().endswith("|") and " trial " in line
+    unknown = tool(ros_env, "clnn_ros.echo", "/no/such/topic", "--wait", "0.5")
+    assert unknown.returncode == 1 and len(unknown.stderr.strip().splitlines()) == 1
+    assert "unknown topic '/no/such/topic'" in unknown.stderr
+
+    os.killpg(process.pid, signal.SIGINT)
+    _, stderr = process.communicate(timeout=30)
+    assert process.returncode == 130 and "Traceback" not in stderr, stderr
+    messages = raw_messages(tmp_path / "run.mcap")  # finished: summary and index present
+    assert assert_every_tick(messages) > 50
+    assert not processes_with(str(tmp_path))
+
+
+def test_killed_agent_leaves_a_complete_bag_up_to_the_fault(ros_env, tmp_path):
+    process = start_run(ros_env, tmp_path, "--stall-timeout", "2")
+    wait_for_line(process.stdout, "trial    2/")
+    os.kill(child(process, "clnn_ros.nodes.agent"), signal.SIGKILL)
+    _, stderr = process.communicate(timeout=30)
+    assert process.returncode == 1 and "stall: node 'agent' went silent" in stderr
+    messages = raw_messages(tmp_path / "run.mcap")
+    last = assert_every_tick(messages, ("/clock", STATE, "/rln/spikes", "/rln/reward"))
+    events = [bag.deserialize(TRIAL_EVENT, m[4]) for m in messages if m[1] == TRIAL_EVENT]
+    assert events[-1].event == 2 and "stall" in events[-1].end_reason
+    assert events[-1].tick == last  # the tick that never completed: its action never came
+    assert not processes_with(str(tmp_path))
+
+
+def test_killed_recorder_leaves_its_complete_chunks(ros_env, tmp_path):
+    process = start_run(ros_env, tmp_path)
+    path = tmp_path / "run.mcap"
+    deadline = time.monotonic() + 60
+    while (not path.exists() or path.stat().st_size < 20_000) and time.monotonic() < deadline:
+        time.sleep(0.05)  # the first chunks are on disk
+    os.kill(child(process, "clnn_ros.nodes.recorder"), signal.SIGKILL)
+    time.sleep(0.5)
+    os.killpg(process.pid, signal.SIGINT)
+    process.communicate(timeout=30)
+    with pytest.raises(bag.BagError, match="truncated"):
+        bag.open_bag(path)
+    messages = raw_messages(path, salvage=True)
+    assert assert_every_tick(messages) > 200
+    result = subprocess.run([sys.executable, "-m", "clnn_ros.analyze", str(path), "--out",
+                             str(tmp_path / "a"), "--salvage"], capture_output=True, text=True,
+                            timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert "salvaged" in (tmp_path / "a" / "summary.md").read_text()
+    assert not processes_with(str(tmp_path))
+
+
+# --- analyze: bad input ------------------------------------------------------------------------
+
+def analyze(*args):
+    return subprocess.run([sys.executable, "-m", "clnn_ros.analyze", *map(str, args)],
+                          capture_output=True, text=True, timeout=60)
+
+
+def test_analyze_refuses_bad_bags_with_one_line(recorded, tmp_path):
+    good = recorded / "run.mcap"
+    truncated = tmp_path / "truncated.mcap"
+    truncated.write_bytes(good.read_bytes()[: good.stat().st_size // 2])
+    text = tmp_path / "text.mcap"
+    text.write_text("not a bag\n")
+    for path, status, message in ((tmp_path / "missing.mcap", 1, "no such file"),
+                                  (text, 1, "not an MCAP file"),
+                                  (truncated, 1, "truncated"),
+                                  (tmp_path / "empty.mcap", 1, "not an MCAP file")):
+        if path.name == "empty.mcap":
+            path.write_bytes(b"")
+        result = analyze(path, "--out", tmp_path / "x")
+        assert result.returncode == status, result.stderr
+        assert message in result.stderr and "Traceback" not in result.stderr
+        assert len(result.stderr.strip().splitlines()) == 1
+    result = analyze(good, "--out", tmp_path / "x", "--trial", "99")
+    assert result.returncode == 2 and "trial 99 is not in the bag" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+
+
+# --- the sample recording in bags/ -------------------------------------------------------------
+
+def test_sample_bag_analysis(tmp_path):
+    sample = REPO / "bags" / "sample_seed0_12trials.mcap"
+    if not sample.exists():
+        pytest.skip("no sample bag")
+    result = analyze(sample, "--out", tmp_path)
+    assert result.returncode == 0, result.stderr
+    with open(tmp_path / "trials.csv") as f:
+        steps = [int(r["steps"]) for r in csv.DictReader(f)]
+    assert steps == [32, 34, 288, 33, 278, 260, 264, 291, 259, 250, 2000, 767]
+    assert math.isclose(np.mean(steps), 396.33, abs_tol=0.01)
+    assert "| `/cartpole/state` | `clnn_ros_msgs/msg/CartPoleState` | 4,779 | 0-4778 | 0 |" in \
+        (tmp_path / "summary.md").read_text()
