@@ -1,7 +1,9 @@
 """A cart-pole with friction and a noisy actuator, written only against docs/ENV_CONTRACT.md
 (rclpy and the message packages, no clnn_ros code).
     python -m clnn_ros.run_all --env-node "python examples/noisy_cartpole.py"
-    python -m clnn_ros.check_env_node python examples/noisy_cartpole.py --ros-args -p force_noise:=0.2
+    python -m clnn_ros.check_env_node python examples/noisy_cartpole.py --ros-args \\
+        -p force_noise:=0.2
+Its own parameters (-p on its command line): cart_friction, pole_friction, force_noise.
 """
 import math, random
 import rclpy
@@ -43,14 +45,20 @@ class NoisyCartPole(Node):
 
     def on_clock(self, m):
         ns = m.clock.sec * 10**9 + m.clock.nanosec
-        self.offer("clock", m) if ns == self.tick * self.tau_ns else self.refuse(f"clock {ns} ns")
+        if ns == self.tick * self.tau_ns:
+            self.offer("clock", m)
+        else:
+            self.refuse(f"clock {ns} ns")
 
     def on_event(self, e):
         if e.event == TrialEvent.EPISODE_END:
             self.done = True
         elif e.event == TrialEvent.START:
-            ok = e.tick == self.tick and self.over and abs(e.initial_angle_deg) < self.p["angle_limit_deg"]
-            self.offer("start", e) if ok else self.refuse(f"START {e.tick} {e.initial_angle_deg}")
+            ok = self.over and abs(e.initial_angle_deg) < self.p["angle_limit_deg"]
+            if ok and e.tick == self.tick:
+                self.offer("start", e)
+            else:
+                self.refuse(f"START of tick {e.tick}, angle {e.initial_angle_deg}")
 
     def on_action(self, a):
         d = a.force_direction
@@ -63,31 +71,43 @@ class NoisyCartPole(Node):
         if key in self.pending:
             return self.refuse(f"a second {key}")
         self.pending[key] = msg
-        if "clock" in self.pending and len(self.pending) == 2:
-            start, action, self.pending, reason = self.pending.get("start"), self.pending.get("action"), {}, ""
-            if start:
-                self.trial, self.steps, self.s = start.trial, 0, [0.0, 0.0, math.radians(start.initial_angle_deg), 0.0]
-            else:
-                reason = self.physics(action.force_direction * self.p["force"] * (1 + self.p["force_noise"] * self.rng.gauss(0, 1)))
-                self.steps += not reason
-            self.over = bool(reason) or self.steps >= self.p["max_steps"]
-            x, xd, th, thd = self.s
-            m = CartPoleState(cart_position_m=x, cart_velocity_m_per_s=xd, pole_angle_deg=math.degrees(th),
-                              pole_angular_velocity_deg_per_s=math.degrees(thd), failed=bool(reason),
-                              failure_reason=reason, successful_steps=self.steps, tick=self.tick, trial=self.trial)
-            m.header.stamp.sec, m.header.stamp.nanosec = divmod(self.tick * self.tau_ns, 10**9)
-            self.pub.publish(m)
-            self.tick += 1
+        if "clock" in self.pending and len(self.pending) == 2:  # clock + (START or action)
+            start, action, self.pending = self.pending.get("start"), self.pending.get("action"), {}
+            self.advance(start, action)
+
+    def advance(self, start, action):
+        reason = ""
+        if start:
+            self.trial, self.steps = start.trial, 0
+            self.s = [0.0, 0.0, math.radians(start.initial_angle_deg), 0.0]
+        else:
+            noise = 1 + self.p["force_noise"] * self.rng.gauss(0, 1)
+            reason = self.physics(action.force_direction * self.p["force"] * noise)
+            self.steps += not reason
+        self.over = bool(reason) or self.steps >= self.p["max_steps"]
+        x, xd, th, thd = self.s
+        m = CartPoleState(cart_position_m=x, cart_velocity_m_per_s=xd,
+                          pole_angle_deg=math.degrees(th),
+                          pole_angular_velocity_deg_per_s=math.degrees(thd), failed=bool(reason),
+                          failure_reason=reason, successful_steps=self.steps, tick=self.tick,
+                          trial=self.trial)
+        m.header.stamp.sec, m.header.stamp.nanosec = divmod(self.tick * self.tau_ns, 10**9)
+        self.pub.publish(m)
+        self.tick += 1
 
     def physics(self, f):  # Barto et al. (1983) with cart and pole friction, semi-implicit Euler
         p, (x, xd, th, thd) = self.p, self.s
-        mt, ml, sin, cos = p["cart_mass"] + p["pole_mass"], p["pole_mass"] * p["pole_length"], math.sin(th), math.cos(th)
-        tmp = (f + ml * thd * thd * sin - p["cart_friction"] * math.copysign(1, xd)) / mt
-        tha = (p["gravity"] * sin - cos * tmp - p["pole_friction"] * thd / ml) / (p["pole_length"] * (4 / 3 - p["pole_mass"] * cos * cos / mt))
-        xd += p["tau"] * (tmp - ml * tha * cos / mt)
+        m, l, mt = p["pole_mass"], p["pole_length"], p["cart_mass"] + p["pole_mass"]
+        sin, cos = math.sin(th), math.cos(th)
+        tmp = (f + m * l * thd * thd * sin - p["cart_friction"] * math.copysign(1, xd)) / mt
+        tha = (p["gravity"] * sin - cos * tmp - p["pole_friction"] * thd / (m * l)) / (
+            l * (4 / 3 - m * cos * cos / mt))
+        xd += p["tau"] * (tmp - m * l * tha * cos / mt)
         thd += p["tau"] * tha
         self.s = [x + p["tau"] * xd, xd, th + p["tau"] * thd, thd]
-        return "pole_angle" if abs(math.degrees(self.s[2])) > p["angle_limit_deg"] else "cart_position" if abs(self.s[0]) > p["track_limit_m"] else ""
+        if abs(math.degrees(self.s[2])) > p["angle_limit_deg"]:
+            return "pole_angle"
+        return "cart_position" if abs(self.s[0]) > p["track_limit_m"] else ""
 
 
 rclpy.init()

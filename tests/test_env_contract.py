@@ -120,3 +120,14 @@ def test_bad_angle_edges(value, message):
         params_from_strings({"angle_edges_deg": value})
     with pytest.raises(ParamError, match=message):
         Params(angle_edges_deg=value)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--env-node", "python x.py", "--composed"], "--env-node runs its own process"),
+    (["--env-node", ""], "--env-node needs a command"),
+    (["--env", "mujoco"], "invalid choice: 'mujoco'"),
+])
+def test_run_all_environment_options_are_checked(ros_env, args, message):
+    result = subprocess.run([PY, "-m", "clnn_ros.run_all", *args], env=ros_env,
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and message in result.stderr, result.stderr
