@@ -328,3 +328,24 @@ def test_sample_bag_analysis(tmp_path):
     assert math.isclose(np.mean(steps), 396.33, abs_tol=0.01)
     assert "| `/cartpole/state` | `clnn_ros_msgs/msg/CartPoleState` | 4,779 | 0-4778 | 0 |" in \
         (tmp_path / "summary.md").read_text()
+
+
+def test_sigterm_finishes_the_bag(ros_env, tmp_path):
+    """A recorder alone (no graph yet) told to stop with SIGTERM writes a finished file."""
+    path = tmp_path / "alone.mcap"
+    process = subprocess.Popen([sys.executable, "-m", "clnn_ros.nodes.recorder", "--ros-args",
+                                "-p", f"bag_path:={path}"], env=ros_env, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 20
+    while not path.exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(0.5)
+    process.send_signal(signal.SIGTERM)
+    _, stderr = process.communicate(timeout=20)
+    assert process.returncode == 143 and "Traceback" not in stderr, stderr
+    reader, stream = bag.open_bag(path)
+    with stream:
+        assert {c.topic for c in reader.get_summary().channels.values()} == set(bag.TOPIC_TYPES)
+    missing = subprocess.run([sys.executable, "-m", "clnn_ros.nodes.recorder"], env=ros_env,
+                             capture_output=True, text=True, timeout=20)
+    assert missing.returncode == 2 and "bag_path is not set" in missing.stderr
