@@ -187,6 +187,11 @@ def main(argv=None) -> int:
         print(f"run_all: error: {error}", file=sys.stderr)
         return 2
     module, environment = ENVIRONMENTS[args.env]
+    if args.env == "gymnasium" and args.env_node is None and \
+            params_from_strings({"tau": values.get("tau", 0.02)}).tau != 0.02:
+        print("run_all: error: --env gymnasium steps gymnasium's tau of 0.02 s, got tau="
+              f"{values['tau']}", file=sys.stderr)
+        return 2
     env_command = [sys.executable, "-m", module]
     if args.env_node is not None:
         env_command = shlex.split(args.env_node)

@@ -126,6 +126,7 @@ def test_bad_angle_edges(value, message):
     (["--env-node", "python x.py", "--composed"], "--env-node runs its own process"),
     (["--env-node", ""], "--env-node needs a command"),
     (["--env", "mujoco"], "invalid choice: 'mujoco'"),
+    (["--env", "gymnasium", "--option", "tau=0.01"], "steps gymnasium's tau of 0.02 s"),
 ])
 def test_run_all_environment_options_are_checked(ros_env, args, message):
     result = subprocess.run([PY, "-m", "clnn_ros.run_all", *args], env=ros_env,
