@@ -45,10 +45,20 @@ def run_parameters(reader) -> tuple[Params, dict]:
     """The run's parameters from the bag's clnn_ros metadata record (defaults if absent)."""
     given = {}
     try:
-        for record in reader.iter_metadata():
-            if record.name == "clnn_ros":
-                given = json.loads(record.metadata.get("parameters", "{}"))
-    except Exception:  # a salvaged stream: the metadata is read with the messages
+        if isinstance(reader, Path):  # salvaged: the record precedes the first chunk
+            from mcap.records import Chunk, Metadata
+            from mcap.stream_reader import StreamReader
+            with open(reader, "rb") as stream:
+                for record in StreamReader(stream).records:
+                    if isinstance(record, Chunk):
+                        break
+                    if isinstance(record, Metadata) and record.name == "clnn_ros":
+                        given = json.loads(record.metadata.get("parameters", "{}"))
+        else:
+            for record in reader.iter_metadata():
+                if record.name == "clnn_ros":
+                    given = json.loads(record.metadata.get("parameters", "{}"))
+    except Exception:  # no readable parameters: the paper's defaults
         pass
     model = {k: v for k, v in given.items() if k not in RUN_SETTINGS}
     if model.get("segments") == 0:
@@ -64,7 +74,7 @@ def read_bag(path: Path, salvage: bool):
     from the publish time (sim time), the raw states, spikes and actions kept per tick."""
     reader, stream = open_bag(path, salvage)
     with stream:
-        params, given = run_parameters(reader) if not salvage else (Params(), {})
+        params, given = run_parameters(path if salvage else reader)
         tau_ns = round(params.tau * 1e9)
         decode = Decoder()
         events, weights = [], []
@@ -84,8 +94,6 @@ def read_bag(path: Path, salvage: bool):
                 if topic in raw:
                     raw[topic][tick] = data
                     schemas[topic] = schema
-        if salvage:
-            params, given = run_parameters(reader)
     return dict(params=params, given=given, events=events, weights=weights, ticks=ticks, raw=raw,
                 schemas=schemas, counts=counts, decode=decode)
 

@@ -195,10 +195,11 @@ def open_bag(path, salvage: bool = False):
             if summary is None or not summary.chunk_indexes and summary.statistics is None:
                 raise McapError("no summary")
             return reader, stream
-        except (McapError, EOFError, ValueError, struct.error, OSError, StopIteration) as error:
+        except (McapError, EOFError, ValueError, struct.error, OSError, StopIteration):
             if not salvage:
-                raise BagError(f"{path}: truncated or damaged MCAP (no readable summary: "
-                               f"{error}); --salvage reads its complete chunks") from None
+                raise BagError(f"{path}: truncated or damaged MCAP (no readable summary at "
+                               f"its end: was the recorder killed?); --salvage reads its "
+                               f"complete chunks") from None
         stream.seek(0)
         return NonSeekingReader(stream), stream
     except BaseException:

@@ -9,6 +9,8 @@ episode and print a summary.
 
 Each node runs as its own process (`python -m clnn_ros.nodes.<name>`) with the same parameters
 YAML; DDS discovery stays on loopback unless ROS_AUTOMATIC_DISCOVERY_RANGE says otherwise.
+A recorder process writes every topic into a rosbag2-compatible MCAP file (docs/RECORDING.md):
+<out>/run.mcap with --out, else bags/run_<UTC time>.mcap, or --bag FILE; --no-record: none.
 Exit status: 0 done, 1 the graph failed (stall, crashed node), 2 bad input, 130 interrupted.
 """
 
