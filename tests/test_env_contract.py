@@ -132,3 +132,16 @@ def test_run_all_environment_options_are_checked(ros_env, args, message):
     result = subprocess.run([PY, "-m", "clnn_ros.run_all", *args], env=ros_env,
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 2 and message in result.stderr, result.stderr
+
+
+def test_graph_encodes_other_angle_edges_from_parameters_only(ros_env, tmp_path):
+    env = {**ros_env, "ROS_DOMAIN_ID": str(150 + os.getpid() % 8)}
+    result = subprocess.run(
+        [PY, "-m", "clnn_ros.run_all", "--quiet", "--no-record", "--option",
+         "angle_edges_deg=-3,0,3", "--seed", "1", "--trials", "6", "--max-steps", "400",
+         "--out", str(tmp_path)], env=env, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    core = run_episode(1, Params(angle_edges_deg="-3,0,3", trials=6, max_steps=400))
+    with open(tmp_path / "trials.csv") as f:
+        assert [int(r["steps"]) for r in csv.DictReader(f)] == core.steps.tolist()
+    np.testing.assert_array_equal(np.load(tmp_path / "final_weights.npy"), core.final_weights)
