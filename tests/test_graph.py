@@ -98,7 +98,7 @@ def test_malformed_messages_are_refused(ros_env, tmp_path):
     refused with a reason and the episode equals the core's."""
     script = Path(__file__).with_name("publish_malformed.py")
     process = subprocess.Popen(
-        [sys.executable, "-m", "clnn_ros.run_all", "--quiet", "--seed", "2", "--trials", "12",
+        [sys.executable, "-m", "clnn_ros.run_all", "--quiet", "--seed", "2", "--trials", "16",
          "--max-steps", "1500", "--out", str(tmp_path)], env=ros_env, stdout=subprocess.PIPE,
         stderr=subprocess.PIPE, text=True)
     fuzzer = subprocess.run([sys.executable, str(script)], env=ros_env, capture_output=True,
@@ -109,7 +109,7 @@ def test_malformed_messages_are_refused(ros_env, tmp_path):
     for reason in ("spikes, the network has 6 inputs", "expected tick", "not a 1-hot code",
                    "force_direction 7 is not -1, 0 or 1", "kind 'jackpot'"):
         assert reason in stderr
-    core = run_episode(2, Params(trials=12, max_steps=1500))
+    core = run_episode(2, Params(trials=16, max_steps=1500))
     assert read_steps(tmp_path) == core.steps.tolist()
     np.testing.assert_array_equal(np.load(tmp_path / "final_weights.npy"), core.final_weights)
 
