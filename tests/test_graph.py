@@ -81,7 +81,7 @@ def test_ctrl_c_stops_everything(ros_env, tmp_path):
     report_shm = 'mount -t tmpfs tmpfs /dev/shm && "$@"; s=$?; echo "shm left: $(ls /dev/shm)"; exit $s'
     process = subprocess.Popen(
         ["unshare", "--mount", "bash", "-c", report_shm, "_", sys.executable, "-m",
-         "clnn_ros.run_all", "--seed", "1", "--trials", "400"],
+         "clnn_ros.run_all", "--seed", "1", "--trials", "400", "--out", str(tmp_path)],
         env=marker, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         start_new_session=True)
     wait_for_line(process.stdout, "trial    2/")
