@@ -229,7 +229,7 @@ def run_batch(seeds, p: Params, weights: np.ndarray | None = None, angles: np.nd
                             for w, _ in setups])
     all_angles = np.stack([a if angles is None else np.asarray(angles, np.float64)
                            for _, a in setups])
-    components, edges, offsets = Encoder.from_params(p).arrays()
+    components, edges, offsets = Encoder.from_params(p).arrays
     rng = seeds.astype(np.uint64).reshape(-1, 1).copy()
     steps = np.zeros(all_angles.shape, dtype=np.int64)
     status = np.zeros(all_angles.shape, dtype=np.int64)

@@ -13,6 +13,7 @@ before the angle leaves +-12 deg).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numba.extending import register_jitable
@@ -39,6 +40,7 @@ class Encoder:
     def n_inputs(self) -> int:
         return sum(len(e) + 1 for e in self.edges)
 
+    @cached_property
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(components, edges padded with +inf, offsets) as arrays for encode_active()."""
         width = max(len(e) for e in self.edges)
@@ -61,7 +63,7 @@ class Encoder:
 
     def active(self, state) -> np.ndarray:
         """Indices of the spiking inputs (one per encoded variable)."""
-        components, edges, offsets = self.arrays()
+        components, edges, offsets = self.arrays
         out = np.empty(len(components), dtype=np.int64)
         encode_active(np.asarray(state, dtype=np.float64), components, edges, offsets, out)
         return out

@@ -22,16 +22,17 @@ class AgentNode(GraphNode):
         weights, _ = seed_setup(self.settings["seed"], self.params)
         self.agent = RLNAgent(self.params, weights, seed=self.settings["seed"])
         self.trial = -1
+        self.action_msg = Action()  # one message object, refilled each tick
         self.join = TickJoin(self, (SPIKES, REWARD), self.on_tick)
         self.subscribe(SpikeVector, SPIKES, self.on_spikes)
         self.subscribe(Reward, REWARD, self.on_reward)
 
     def on_spikes(self, msg: SpikeVector) -> None:
-        spikes = np.asarray(msg.spikes, dtype=np.uint8)
+        spikes = msg.spikes
         if len(spikes) != self.params.n_inputs:
             self.refuse(SPIKES, msg, f"{len(spikes)} spikes, the network has "
                                      f"{self.params.n_inputs} inputs")
-        elif spikes.max(initial=0) > 1 or spikes.sum() != self.params.nsv:
+        elif max(spikes, default=0) > 1 or sum(spikes) != self.params.nsv:
             self.refuse(SPIKES, msg, f"not a 1-hot code per state variable: {list(msg.spikes)}")
         else:
             self.join.offer(SPIKES, msg)
@@ -50,12 +51,15 @@ class AgentNode(GraphNode):
             self.agent.begin_trial()
         else:
             self.agent.learn(REWARD_KINDS.index(reward.kind))
-        action = Action(force_direction=0, force_n=0.0)
-        if not reward.trial_over:
-            neuron, segment = self.agent.act(np.asarray(spikes.spikes, dtype=np.uint8))
-            action = Action(force_direction=1 if neuron else -1,
-                            force_n=self.params.force if neuron else -self.params.force,
-                            winning_neuron=neuron, winning_segment=segment)
+        action = self.action_msg
+        if reward.trial_over:  # only learn; force 0 tells the others the trial is over
+            action.force_direction, action.force_n = 0, 0.0
+            action.winning_neuron = action.winning_segment = 0
+        else:
+            neuron, segment = self.agent.act(np.frombuffer(spikes.spikes, dtype=np.uint8))
+            action.force_direction = 1 if neuron else -1
+            action.force_n = self.params.force if neuron else -self.params.force
+            action.winning_neuron, action.winning_segment = neuron, segment
         self.action_pub.publish(self.stamp(action, reward.tick, reward.trial))
         if reward.trial_over:
             w = self.agent.weights

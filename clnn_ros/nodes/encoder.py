@@ -18,7 +18,8 @@ class EncoderNode(GraphNode):
         # spike subscribers: agent, trial manager
         super().__init__("encoder", {"spikes_pub": (SpikeVector, SPIKES, 2)}, **options)
         self.encoder = Encoder.from_params(self.params)
-        self.labels = self.encoder.labels()
+        # One message object, refilled each tick (publish serializes it at once); labels fixed.
+        self.spikes_msg = SpikeVector(input_labels=self.encoder.labels())
         self.tick = 0
         self.subscribe(CartPoleState, STATE, self.on_state)
 
@@ -32,9 +33,9 @@ class EncoderNode(GraphNode):
             self.refuse(STATE, msg, f"non-finite state {state}")
             return
         spikes = self.encoder.spikes(state)
-        self.spikes_pub.publish(self.stamp(SpikeVector(
-            spikes=spikes.tolist(), input_labels=self.labels,
-            spiking_inputs=spikes.nonzero()[0].tolist()), msg.tick, msg.trial))
+        out = self.spikes_msg
+        out.spikes, out.spiking_inputs = spikes.tolist(), spikes.nonzero()[0].tolist()
+        self.spikes_pub.publish(self.stamp(out, msg.tick, msg.trial))
         self.tick += 1
 
 

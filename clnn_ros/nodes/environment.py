@@ -28,7 +28,9 @@ class EnvironmentNode(GraphNode):
         self.trial = -1
         self.successful_steps = 0
         self.trial_over = True  # the first tick is a trial start
+        self.over_tick = None  # tick of the last state of the trial that just ended
         self.pending = {}  # this tick's inputs: "clock", and "start" or "action"
+        self.state_msg = CartPoleState()
         self.subscribe(Clock, CLOCK, self.on_clock)
         self.subscribe(Action, ACTION, self.on_action)
 
@@ -57,12 +59,18 @@ class EnvironmentNode(GraphNode):
     def on_action(self, action: Action) -> None:
         if action.force_direction not in (-1, 0, 1):
             self.refuse(ACTION, action, f"force_direction {action.force_direction} is not -1, 0 or 1")
+        elif action.force_direction == 0:
+            # The agent's answer to a trial's last state. It travels on its own topic, so it may
+            # arrive after the next trial's START and clock: match it by its tick alone.
+            if action.tick != self.over_tick:
+                self.refuse(ACTION, action, "force_direction 0 answers only the last state of a "
+                                            "trial")
+            self.over_tick = None
+        elif self.trial_over:
+            self.refuse(ACTION, action, "the trial is over: no force applies")
         elif action.tick + 1 != self.tick:
             self.refuse(ACTION, action, f"expected the action of tick {self.tick - 1}")
-        elif (action.force_direction == 0) != self.trial_over:
-            self.refuse(ACTION, action, "force_direction 0 is only for the last tick of a trial"
-                        if action.force_direction == 0 else "the trial is over: no force applies")
-        elif action.force_direction != 0:
+        else:
             self._offer("action", action)
 
     def _offer(self, name: str, msg) -> None:
@@ -84,12 +92,14 @@ class EnvironmentNode(GraphNode):
             status = self.cartpole.step(1 if action.force_direction > 0 else 0)
             self.successful_steps += status == CONTINUE
         self.trial_over = status != CONTINUE or self.successful_steps >= self.params.max_steps
-        x, x_dot, theta, theta_dot = self.cartpole.state
-        self.state_pub.publish(self.stamp(CartPoleState(
-            cart_position_m=x, cart_velocity_m_per_s=x_dot, pole_angle_deg=theta,
-            pole_angular_velocity_deg_per_s=theta_dot, failed=status != CONTINUE,
-            failure_reason=FAILURE_REASONS[status], successful_steps=self.successful_steps),
-            self.tick, self.trial))
+        if self.trial_over:
+            self.over_tick = self.tick
+        state = self.state_msg  # one message object, refilled each tick (publish copies it)
+        (state.cart_position_m, state.cart_velocity_m_per_s, state.pole_angle_deg,
+         state.pole_angular_velocity_deg_per_s) = self.cartpole.state
+        state.failed, state.failure_reason = status != CONTINUE, FAILURE_REASONS[status]
+        state.successful_steps = self.successful_steps
+        self.state_pub.publish(self.stamp(state, self.tick, self.trial))
         self.tick += 1
 
 

@@ -20,6 +20,7 @@ class RewardNode(GraphNode):
         self.counter = SuccessCounter(self.params)
         self.tick = 0
         self.trial = -1
+        self.reward_msg = Reward()  # one message object, refilled each tick
         self.subscribe(CartPoleState, STATE, self.on_state)
 
     def on_state(self, msg: CartPoleState) -> None:
@@ -32,10 +33,11 @@ class RewardNode(GraphNode):
             kind = NONE
         else:
             kind = self.counter.outcome(msg.failed)
-        over = msg.failed or msg.successful_steps >= self.params.max_steps
-        self.reward_pub.publish(self.stamp(Reward(
-            reward_one_hot=ONE_HOT[kind], kind=REWARD_KINDS[kind],
-            success_counter=self.counter.count, trial_over=over), msg.tick, msg.trial))
+        out = self.reward_msg
+        out.reward_one_hot, out.kind = ONE_HOT[kind], REWARD_KINDS[kind]
+        out.success_counter = self.counter.count
+        out.trial_over = msg.failed or msg.successful_steps >= self.params.max_steps
+        self.reward_pub.publish(self.stamp(out, msg.tick, msg.trial))
         self.tick += 1
 
 

@@ -40,6 +40,7 @@ class TrialManagerNode(GraphNode):
                                            "event_pub": (TrialEvent, TRIAL_EVENT, 4)}, **options)
         _, self.angles = seed_setup(self.settings["seed"], self.params)
         self.results = []  # (trial, initial angle, steps, end reason)
+        self.clock_msg = Clock()
         self.final_weights = None
         self.weights_tick = None
         self.last_trial_tick = None  # set when the last trial is over
@@ -105,7 +106,7 @@ class TrialManagerNode(GraphNode):
         self.publish_clock(tick)
 
     def publish_clock(self, tick: int) -> None:
-        clock = Clock()
+        clock = self.clock_msg  # one message object, refilled each tick
         clock.clock.sec, clock.clock.nanosec = divmod(tick * self.tau_ns, 1_000_000_000)
         self.clock_pub.publish(clock)
 
