@@ -10,7 +10,7 @@ import math
 from clnn_ros_msgs.msg import CartPoleState, SpikeVector
 
 from ..core.encoder import Encoder
-from .common import SPIKES, STATE, GraphNode, node_main
+from .common import SPIKES, STATE, GraphNode, TickJoin, node_main
 
 
 class EncoderNode(GraphNode):
@@ -20,24 +20,24 @@ class EncoderNode(GraphNode):
         self.encoder = Encoder.from_params(self.params)
         # One message object, refilled each tick (publish serializes it at once); labels fixed.
         self.spikes_msg = SpikeVector(input_labels=self.encoder.labels())
-        self.tick = 0
+        self.join = TickJoin(self, (STATE,), self.on_tick)
         self.subscribe(CartPoleState, STATE, self.on_state)
 
     def on_state(self, msg: CartPoleState) -> None:
         state = (msg.cart_position_m, msg.cart_velocity_m_per_s, msg.pole_angle_deg,
                  msg.pole_angular_velocity_deg_per_s)
-        if msg.tick != self.tick:
-            self.refuse(STATE, msg, f"expected tick {self.tick}")
-            return
-        if not all(math.isfinite(v) for v in state):
+        if all(math.isfinite(v) for v in state):
+            self.join.offer(STATE, msg)
+        else:
             self.refuse(STATE, msg, f"non-finite state {state}")
-            return
-        spikes = self.encoder.spikes(state)
+
+    def on_tick(self, inbox: dict) -> None:
+        msg = inbox[STATE]
+        spikes = self.encoder.spikes((msg.cart_position_m, msg.cart_velocity_m_per_s,
+                                      msg.pole_angle_deg, msg.pole_angular_velocity_deg_per_s))
         out = self.spikes_msg
         out.spikes, out.spiking_inputs = spikes.tolist(), spikes.nonzero()[0].tolist()
         self.spikes_pub.publish(self.stamp(out, msg.tick, msg.trial))
-        self.tick += 1
-
 
 def main() -> None:
     raise SystemExit(node_main(EncoderNode))

@@ -10,7 +10,7 @@ from __future__ import annotations
 from clnn_ros_msgs.msg import CartPoleState, Reward
 
 from ..core.rln import NONE, ONE_HOT, REWARD_KINDS, SuccessCounter
-from .common import REWARD, STATE, GraphNode, node_main
+from .common import REWARD, STATE, GraphNode, TickJoin, node_main
 
 
 class RewardNode(GraphNode):
@@ -18,15 +18,13 @@ class RewardNode(GraphNode):
         # reward subscribers: agent, trial manager
         super().__init__("reward", {"reward_pub": (Reward, REWARD, 2)}, **options)
         self.counter = SuccessCounter(self.params)
-        self.tick = 0
         self.trial = -1
         self.reward_msg = Reward()  # one message object, refilled each tick
-        self.subscribe(CartPoleState, STATE, self.on_state)
+        self.join = TickJoin(self, (STATE,), self.on_tick)
+        self.subscribe(CartPoleState, STATE, lambda msg: self.join.offer(STATE, msg))
 
-    def on_state(self, msg: CartPoleState) -> None:
-        if msg.tick != self.tick:
-            self.refuse(STATE, msg, f"expected tick {self.tick}")
-            return
+    def on_tick(self, inbox: dict) -> None:
+        msg = inbox[STATE]
         if msg.trial != self.trial:  # the trial's first state: no step has been taken yet
             self.trial = msg.trial
             self.counter.begin_trial()
@@ -38,8 +36,6 @@ class RewardNode(GraphNode):
         out.success_counter = self.counter.count
         out.trial_over = msg.failed or msg.successful_steps >= self.params.max_steps
         self.reward_pub.publish(self.stamp(out, msg.tick, msg.trial))
-        self.tick += 1
-
 
 def main() -> None:
     raise SystemExit(node_main(RewardNode))
