@@ -258,13 +258,13 @@ def summary_markdown(bag_path: Path, result: dict, salvage: bool) -> str:
     cap = data["params"].max_steps
     end = result["episode_end"]
     lines = [f"# Analysis of `{bag_path.name}`", "",
-             f"Rebuilt from the bag alone by `python -m clnn_ros.analyze`"
+             "Rebuilt from the bag alone by `python -m clnn_ros.analyze`"
              + (" (salvaged: the file was not finished, only its complete chunks)" if salvage
                 else "") + ".", "",
              "## Run", "",
              f"* seed {result['seed']}, {data['params'].nsv} state variable(s), step cap "
              f"{cap:,}, physics {data['params'].physics}",
-             f"* how it ended: " + (f"EPISODE_END, `{end.end_reason}` at tick {end.tick}" if end
+             "* how it ended: " + (f"EPISODE_END, `{end.end_reason}` at tick {end.tick}" if end
                                     else "no EPISODE_END in the bag (interrupted, or the "
                                          "recorder was killed)"),
              f"* trials completed: {len(rows)}" + (
@@ -273,7 +273,7 @@ def summary_markdown(bag_path: Path, result: dict, salvage: bool) -> str:
              ]
     first_cap = next((r[1] for r in rows if r[3] >= cap), None)
     if rows:
-        lines.append(f"* first trial to reach the step cap: "
+        lines.append("* first trial to reach the step cap: "
                      + (f"trial {first_cap}" if first_cap is not None else "none"))
         ends = {}
         for r in rows:

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import array
-import signal
 import sys
 import time
 
@@ -25,7 +24,9 @@ from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before r
 import rclpy
 import yaml
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
+
+from .bag import TOPIC_TYPES, message_class
+from .nodes.common import ros_session
 
 ECHO_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 
@@ -124,7 +125,6 @@ class Raster:
 
 
 def topic_type(node, topic: str, wait_s: float) -> str:
-    from .bag import TOPIC_TYPES
     if topic in TOPIC_TYPES:
         return TOPIC_TYPES[topic]
     deadline = time.monotonic() + wait_s
@@ -150,52 +150,45 @@ def main(argv=None) -> int:
     parser.add_argument("--wait", type=float, default=3.0,
                         help="seconds to wait for a topic that is not one of the graph's (3)")
     args = parser.parse_args(argv)
-    received = []
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda number, _frame: received.append(number))
-    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    node = None
-    try:
+    with ros_session() as received:
         node = rclpy.create_node("echo", start_parameter_services=False, enable_rosout=False)
-        from .bag import message_class
-        type_name = topic_type(node, args.topic, args.wait)
-        cls = message_class(type_name)
-        if args.raster and not hasattr(cls(), "input_labels"):
-            raise EchoError(f"--raster needs a SpikeVector topic such as /rln/spikes, not "
-                            f"{args.topic} ({type_name})")
-        if args.field:
-            get_field(cls(), args.field)  # check the path before any message comes
-        printed = []
-        raster = Raster(sys.stdout) if args.raster else None
+        try:
+            type_name = topic_type(node, args.topic, args.wait)
+            cls = message_class(type_name)
+            if args.raster and not hasattr(cls(), "input_labels"):
+                raise EchoError(f"--raster needs a SpikeVector topic such as /rln/spikes, not "
+                                f"{args.topic} ({type_name})")
+            if args.field:
+                get_field(cls(), args.field)  # check the path before any message comes
+            printed = []
+            raster = Raster(sys.stdout) if args.raster else None
 
-        def show(msg) -> None:
-            if args.once and printed:
-                return
-            if raster is not None:
-                raster(msg)
-            else:
-                text = format_value(get_field(msg, args.field) if args.field else msg)
-                sys.stdout.write(text + "\n---\n")
-            sys.stdout.flush()
-            printed.append(1)
+            def show(msg) -> None:
+                if args.once and printed:
+                    return
+                if raster is not None:
+                    raster(msg)
+                else:
+                    text = format_value(get_field(msg, args.field) if args.field else msg)
+                    sys.stdout.write(text + "\n---\n")
+                sys.stdout.flush()
+                printed.append(1)
 
-        node.create_subscription(cls, args.topic, show, ECHO_QOS)
-        while not received and not (args.once and printed):
-            rclpy.spin_once(node, timeout_sec=0.1)
-        return 128 + received[0] if received else 0
-    except EchoError as error:
-        print(f"echo: error: {error}", file=sys.stderr)
-        return 1
-    except BrokenPipeError:  # `| head`
-        sys.stderr.close()
-        return 0
-    except (ImportError, AttributeError, ValueError) as error:
-        print(f"echo: error: cannot load the type of {args.topic}: {error}", file=sys.stderr)
-        return 1
-    finally:
-        if node is not None:
+            node.create_subscription(cls, args.topic, show, ECHO_QOS)
+            while not received and not (args.once and printed):
+                rclpy.spin_once(node, timeout_sec=0.1)
+            return 128 + received[0] if received else 0
+        except EchoError as error:
+            print(f"echo: error: {error}", file=sys.stderr)
+            return 1
+        except BrokenPipeError:  # `| head`
+            sys.stderr.close()
+            return 0
+        except (ImportError, AttributeError, ValueError) as error:
+            print(f"echo: error: cannot load the type of {args.topic}: {error}", file=sys.stderr)
+            return 1
+        finally:
             node.destroy_node()
-        rclpy.try_shutdown()
 
 
 if __name__ == "__main__":

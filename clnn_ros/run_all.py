@@ -30,12 +30,9 @@ import yaml
 
 from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
 
-import rclpy
-from rclpy.signals import SignalHandlerOptions
-
 from .core.params import ParamError, params_from_strings
 from .nodes.agent import AgentNode
-from .nodes.common import (RUN_SETTINGS, catch_signals, convert_setting, make_executor,
+from .nodes.common import (RUN_SETTINGS, catch_signals, convert_setting, make_executor, ros_session,
                            spin_until_finished)
 from .nodes import recorder as recorder_node
 from .nodes.encoder import EncoderNode
@@ -160,25 +157,23 @@ def stop_all(processes: dict) -> None:
 
 
 def run_composed(values: dict, environment=EnvironmentNode) -> int:
-    signals = catch_signals()
-    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    nodes = []
-    try:
-        nodes = [cls(overrides=values) for cls in (environment, EncoderNode, RewardNode,
-                                                   AgentNode, TrialManagerNode)]
-        executor = make_executor()
-        for node in nodes:
-            executor.add_node(node)
-        spin_until_finished(executor, nodes[-1].finished, signals)
-        if signals:
+    with ros_session() as signals:
+        nodes = []
+        try:
+            for cls in (environment, EncoderNode, RewardNode, AgentNode, TrialManagerNode):
+                nodes.append(cls(overrides=values))
+            executor = make_executor()
             for node in nodes:
-                node.interrupted()
-            return 128 + signals[0]
-        return nodes[-1].finished.result()
-    finally:
-        for node in nodes:
-            node.destroy_node()
-        rclpy.try_shutdown()
+                executor.add_node(node)
+            spin_until_finished(executor, nodes[-1].finished, signals)
+            if signals:
+                for node in nodes:
+                    node.interrupted()
+                return 128 + signals[0]
+            return nodes[-1].finished.result()
+        finally:
+            for node in nodes:
+                node.destroy_node()
 
 
 def main(argv=None) -> int:

@@ -10,14 +10,14 @@ Exit status 0; 130 on Ctrl-C.
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
 import time
 
 from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
 
 import rclpy
-from rclpy.signals import SignalHandlerOptions
+
+from .nodes.common import ros_session
 
 OWN = {"/parameter_events", "/rosout"}  # this tool's own node has these
 
@@ -31,40 +31,33 @@ def main(argv=None) -> int:
                         help="at most this many seconds of discovery (5); it lists as soon as "
                              "the graph's topics have been stable for 1 s")
     args = parser.parse_args(argv)
-    received = []
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda number, _frame: received.append(number))
-    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    node = None
-    try:
+    with ros_session() as received:
         node = rclpy.create_node("topics", start_parameter_services=False, enable_rosout=False)
-        start = changed = time.monotonic()
-        seen = set()
-        while not received:  # until --wait, or once other topics appeared and stay the same 1 s
-            rclpy.spin_once(node, timeout_sec=0.05)
-            now = time.monotonic()
-            names = {name for name, _ in node.get_topic_names_and_types()}
-            if names != seen:
-                seen, changed = names, now
-            if now - start > args.wait or (names - OWN and now - changed > 1.0):
-                break
-        if received:
-            return 128 + received[0]
-        for name, types in sorted(node.get_topic_names_and_types()):
-            line = f"{name} [{', '.join(types)}]"
-            if args.count:
-                line += (f"  publishers {node.count_publishers(name)}, subscribers "
-                         f"{node.count_subscribers(name)}")
-            print(line)
-        return 0
-    except BrokenPipeError:
-        sys.stderr.close()
-        return 0
-    finally:
-        if node is not None:
+        try:
+            start = changed = time.monotonic()
+            seen = set()
+            while not received:  # until --wait, or once other topics appeared and stay the same 1 s
+                rclpy.spin_once(node, timeout_sec=0.05)
+                now = time.monotonic()
+                names = {name for name, _ in node.get_topic_names_and_types()}
+                if names != seen:
+                    seen, changed = names, now
+                if now - start > args.wait or (names - OWN and now - changed > 1.0):
+                    break
+            if received:
+                return 128 + received[0]
+            for name, types in sorted(node.get_topic_names_and_types()):
+                line = f"{name} [{', '.join(types)}]"
+                if args.count:
+                    line += (f"  publishers {node.count_publishers(name)}, subscribers "
+                             f"{node.count_subscribers(name)}")
+                print(line)
+            return 0
+        except BrokenPipeError:
+            sys.stderr.close()
+            return 0
+        finally:
             node.destroy_node()
-        rclpy.try_shutdown()
-
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -21,7 +21,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 
 SEEDS, TRIALS = 32, 512  # the paper's full set
 CORE_STEPS = 200_000  # enough for a stable rate of the slow reference

@@ -7,7 +7,6 @@ import array
 import csv
 import math
 import os
-import shutil
 import signal
 import subprocess
 import sys

@@ -17,7 +17,8 @@ from __future__ import annotations
 import os
 import signal
 import sys
-from typing import Callable
+from contextlib import contextmanager
+from typing import Callable, Iterator
 
 from .. import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
 
@@ -184,6 +185,18 @@ def catch_signals() -> list[int]:
     return received
 
 
+@contextmanager
+def ros_session(argv: list[str] | None = None) -> Iterator[list[int]]:
+    """rclpy for one process: SIGINT and SIGTERM are recorded (catch_signals) instead of being
+    handled by rclpy, and rclpy is shut down on the way out. Yields the signals received."""
+    signals = catch_signals()
+    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        yield signals
+    finally:
+        rclpy.try_shutdown()
+
+
 def spin_until_finished(executor, finished: Future, signals: list[int]) -> None:
     """Spin until `finished` is done or a signal arrived. (EventsExecutor's own
     spin_until_future_complete does not return when a callback completes the future.)"""
@@ -195,25 +208,22 @@ def node_main(factory: Callable[[], GraphNode], argv: list[str] | None = None) -
     """Run one node in its own process until the episode ends; returns the exit status.
     Bad parameters: one error line, exit 2. SIGINT/SIGTERM: clean shutdown, 130/143."""
     argv = sys.argv if argv is None else argv
-    signals = catch_signals()
-    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
-    node = None
-    try:
-        node = factory()
-        executor = make_executor()
-        executor.add_node(node)
-        spin_until_finished(executor, node.finished, signals)
-        if signals:
-            node.interrupted()
-            return 128 + signals[0]
-        return node.finished.result()
-    except ParamError as error:
-        print(f"{os.path.basename(argv[0])}: error: {error}", file=sys.stderr)
-        return 2
-    finally:
-        if node is not None:
+    with ros_session(argv) as signals:
+        try:
+            node = factory()
+        except ParamError as error:
+            print(f"{os.path.basename(argv[0])}: error: {error}", file=sys.stderr)
+            return 2
+        try:
+            executor = make_executor()
+            executor.add_node(node)
+            spin_until_finished(executor, node.finished, signals)
+            if signals:
+                node.interrupted()
+                return 128 + signals[0]
+            return node.finished.result()
+        finally:
             node.destroy_node()
-        rclpy.try_shutdown()
 
 
 class TickJoin:

@@ -23,24 +23,22 @@ from pathlib import Path
 
 from .. import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
 
-import rclpy
 from mcap.writer import CompressionType, Writer
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
-from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from std_msgs.msg import String
 
 from clnn_ros_msgs.msg import TrialEvent
 
 from .. import bag
-from .common import READY, READY_QOS, TRIAL_EVENT, catch_signals, make_executor, spin_until_finished
+from .common import READY, READY_QOS, TRIAL_EVENT, make_executor, ros_session, spin_until_finished
 
 NAME = "recorder"
 PER_TICK = ("/clock", "/cartpole/state", "/rln/spikes", "/rln/reward", "/rln/action")
 # Deep enough that the DDS receive thread never drops a message while Python is busy (the
-# graph's publishers keep 64): the recorder may lag behind the lockstep graph without loss.
+# graph's publishers keep 2000): the recorder may lag behind the lockstep graph without loss.
 RECORD_QOS = QoSProfile(depth=100_000, reliability=ReliabilityPolicy.RELIABLE,
                         history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
 LINGER_S = 0.3      # after EPISODE_END: wait for messages still in flight on other topics
@@ -159,21 +157,18 @@ class RecorderNode(Node):
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv if argv is None else argv
-    signals = catch_signals()
-    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
-    node = None
-    try:
+    with ros_session(argv) as signals:
         try:
             node = RecorderNode()
         except (OSError, ValueError) as error:
             print(f"recorder: error: {error}", file=sys.stderr)
             return 2
-        executor = make_executor()
-        executor.add_node(node)
-        spin_until_finished(executor, node.finished, signals)
-        return 128 + signals[0] if signals else node.finished.result()
-    finally:
-        if node is not None:
+        try:
+            executor = make_executor()
+            executor.add_node(node)
+            spin_until_finished(executor, node.finished, signals)
+            return 128 + signals[0] if signals else node.finished.result()
+        finally:
             node.close()
             total = sum(node.counts.values())
             print(f"recorder: {total} messages in {node.path} "
@@ -182,7 +177,6 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"recorder: warning: {node.missing} messages of per-tick topics never "
                       f"arrived (gaps in the ticks)", file=sys.stderr, flush=True)
             node.destroy_node()
-        rclpy.try_shutdown()
 
 
 if __name__ == "__main__":
