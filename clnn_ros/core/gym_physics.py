@@ -19,22 +19,16 @@ import numpy as np
 from .physics import CONTINUE, FAIL_ANGLE, FAIL_POSITION
 
 
-def make_gym_cartpole():
-    """gymnasium.make("CartPole-v1").unwrapped (no TimeLimit: the trial's cap is max_steps)."""
-    import gymnasium  # imported here: the rest of the core does not need it
-
-    return gymnasium.make("CartPole-v1").unwrapped
-
-
 class GymCartPole:
     """Gymnasium's CartPole-v1 with the core's interface: reset(angle_deg), step(0|1) -> status,
     state = (x m, x_dot m/s, theta deg, theta_dot deg/s)."""
 
     def __init__(self, params=None):  # params accepted (and unused) for CartPole's signature
-        self.env = make_gym_cartpole()
+        import gymnasium  # imported here: the rest of the core does not need it
+
+        # unwrapped: no TimeLimit, the trial's cap is max_steps
+        self.env = gymnasium.make("CartPole-v1").unwrapped
         self.tau = self.env.tau
-        self.angle_limit_deg = math.degrees(self.env.theta_threshold_radians)
-        self.track_limit_m = self.env.x_threshold
         self.state = (0.0, 0.0, 0.0, 0.0)
 
     def reset(self, initial_angle_deg: float) -> tuple:
@@ -52,7 +46,7 @@ class GymCartPole:
         self._read_state()
         if not terminated:
             return CONTINUE
-        x, _, theta, _ = self.env.state
+        theta = self.env.state[2]
         return FAIL_ANGLE if abs(theta) > self.env.theta_threshold_radians else FAIL_POSITION
 
     def _read_state(self) -> None:
