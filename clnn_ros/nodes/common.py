@@ -96,8 +96,12 @@ class GraphNode(Node):
         if self.listens_to_trial_events:
             self.subscribe(TrialEvent, TRIAL_EVENT, self.on_trial_event)
 
+    def publishers_matched(self) -> bool:
+        """Has each publisher matched the subscribers the graph gives it?"""
+        return all(p.get_subscription_count() >= n for p, n in self._expected)
+
     def _announce_when_matched(self) -> None:
-        if all(p.get_subscription_count() >= n for p, n in self._expected):
+        if self.publishers_matched():
             self._ready_publisher.publish(String(data=self.get_name()))
             self._ready_timer.cancel()
 

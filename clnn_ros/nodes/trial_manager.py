@@ -84,8 +84,7 @@ class TrialManagerNode(GraphNode):
         """Start once every node is ready; afterwards watch for a stall."""
         now = time.monotonic()
         if self.started_at is None:
-            own = all(p.get_subscription_count() >= n for p, n in self._expected)
-            if own and self.ready >= set(GRAPH_NODES) | self.extra_nodes:
+            if self.publishers_matched() and self.ready >= set(GRAPH_NODES) | self.extra_nodes:
                 self.started_at = self.last_progress = now
                 self.start_trial(0)
             elif now - self.last_progress > STARTUP_TIMEOUT_S:
