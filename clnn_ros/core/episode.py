@@ -13,6 +13,9 @@ Seed protocol (so that any two implementations can be compared trial by trial):
     rng = numpy.random.default_rng(seed)
     weights = w_base + rng.uniform(0, w_range, size=(2, q, n_inputs))
     initial angles = successive grid[rng.permutation(32)], concatenated, cut to `trials`.
+
+An episode can stop after any trial and resume from a checkpoint (core.checkpoint): it then
+runs the seed's remaining trials, and its results equal those of the uninterrupted episode.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from typing import Callable
 
 import numpy as np
 
+from .checkpoint import Checkpoint, capture, check_resumable, load_checkpoint, load_weights, restore
 from .encoder import Encoder
 from .params import Params
 from .physics import CONTINUE, CartPole
@@ -53,6 +57,7 @@ class EpisodeResult:
     steps: np.ndarray  # (trials,) successful steps
     end_status: np.ndarray  # (trials,) physics status that ended the trial (CONTINUE = reached the cap)
     final_weights: np.ndarray
+    checkpoint: Checkpoint | None = None  # the state after the last trial: resume from it
 
 
 def run_trial(agent: RLNAgent, counter: SuccessCounter, env: CartPole, encoder: Encoder,
@@ -77,21 +82,45 @@ def run_trial(agent: RLNAgent, counter: SuccessCounter, env: CartPole, encoder: 
     return steps, CONTINUE
 
 
+def start_episode(seed: int, p: Params, weights: np.ndarray | None = None,
+                  resume: Checkpoint | None = None) -> tuple[RLNAgent, SuccessCounter, int]:
+    """(agent, success counter, first trial) of an episode: new from the seed's weights or
+    `weights`, or continuing the checkpoint `resume` (which must fit seed and p)."""
+    if resume is None:
+        weights = seed_setup(seed, p)[0] if weights is None else weights
+        return RLNAgent(p, weights, seed=seed), SuccessCounter(p), 0
+    if weights is not None:
+        raise ValueError("weights and resume exclude each other: a checkpoint has its weights")
+    check_resumable(resume, p, seed)
+    return *restore(resume), resume.next_trial
+
+
+def start_from_setting(seed: int, p: Params, init_weights: str) -> tuple[RLNAgent, SuccessCounter, int]:
+    """start_episode from the run setting `init_weights`: "" the seed's weights; "fig7", "fig12"
+    or a weights .npy: a new episode with those weights; a checkpoint .npz: resume it.
+    CheckpointError (a ParamError) with one line for a file or name that does not fit."""
+    if init_weights.endswith(".npz"):
+        return start_episode(seed, p, resume=load_checkpoint(init_weights))
+    return start_episode(seed, p, load_weights(init_weights, p) if init_weights else None)
+
+
 def run_episode(seed: int, p: Params, weights: np.ndarray | None = None, learn: bool = True,
                 angles: np.ndarray | None = None,
-                env_factory: Callable[[Params], CartPole] = CartPole) -> EpisodeResult:
+                env_factory: Callable[[Params], CartPole] = CartPole,
+                resume: Checkpoint | None = None) -> EpisodeResult:
     """One episode with the seed protocol; `weights`/`angles` override the seed's own;
-    `env_factory(p)` makes the environment (e.g. core.gym_physics.GymCartPole)."""
-    seed_weights, seed_angles = seed_setup(seed, p)
-    weights = seed_weights if weights is None else weights
-    angles = seed_angles if angles is None else np.asarray(angles, dtype=np.float64)
-    agent = RLNAgent(p, weights, seed=seed)
-    counter, env, encoder = SuccessCounter(p), env_factory(p), Encoder.from_params(p)
+    `env_factory(p)` makes the environment (e.g. core.gym_physics.GymCartPole); `resume`
+    continues a checkpoint with the seed's remaining trials (up to p.trials)."""
+    agent, counter, first_trial = start_episode(seed, p, weights, resume)
+    angles = seed_setup(seed, p)[1][first_trial:] if angles is None else \
+        np.asarray(angles, dtype=np.float64)
+    env, encoder = env_factory(p), Encoder.from_params(p)
     steps = np.zeros(len(angles), dtype=np.int64)
     status = np.zeros(len(angles), dtype=np.int64)
     for trial, angle in enumerate(angles):
         steps[trial], status[trial] = run_trial(agent, counter, env, encoder, angle, p, learn)
-    return EpisodeResult(seed, angles, steps, status, agent.weights.copy())
+    return EpisodeResult(seed, angles, steps, status, agent.weights.copy(),
+                         capture(agent, counter, seed, first_trial + len(angles)))
 
 
 def evaluate_weights(weights: np.ndarray, p: Params) -> EpisodeResult:

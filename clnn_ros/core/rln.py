@@ -76,6 +76,26 @@ class RLNAgent:
         self.last_spikes = np.zeros(shape[2], dtype=np.uint8)
         self.random_state = np.array([seed], dtype=np.uint64)  # only used by tie_break="random"
 
+    # Everything that changes while the agent runs (its state), by attribute name.
+    STATE = ("weights", "punish_counter", "reward_counter", "eligible", "last_spikes",
+             "random_state")
+
+    def state(self) -> dict[str, np.ndarray]:
+        """Copies of the agent's whole state (what core.checkpoint saves)."""
+        return {name: getattr(self, name).copy() for name in self.STATE}
+
+    def load_state(self, state: dict[str, np.ndarray]) -> None:
+        """Take over a state from state(): each array must have its attribute's shape and dtype;
+        ValueError otherwise."""
+        values = {name: np.array(state[name]) for name in self.STATE}  # copies
+        for name, value in values.items():  # all checked before any is taken over
+            current = getattr(self, name)
+            if value.shape != current.shape or value.dtype != current.dtype:
+                raise ValueError(f"{name} must be {current.dtype} of shape {current.shape}, "
+                                 f"got {value.dtype} of shape {value.shape}")
+        for name, value in values.items():
+            setattr(self, name, value)
+
     def begin_trial(self) -> None:
         """Counters and e flags restart with each trial; the weights carry over."""
         self.punish_counter[:] = 0
