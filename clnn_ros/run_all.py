@@ -30,7 +30,9 @@ import yaml
 
 from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
 
-from .core.params import ParamError, params_from_strings
+from .core.checkpoint import OPTIMAL, Checkpoint, load_checkpoint
+from .core.episode import start_from_setting
+from .core.params import ParamError, Params, params_from_strings
 from .nodes.agent import AgentNode
 from .nodes.common import (RUN_SETTINGS, catch_signals, convert_setting, make_executor, ros_session,
                            spin_until_finished)
@@ -52,9 +54,12 @@ SHUTDOWN_GRACE_S = 5.0  # how long nodes get to exit after the episode ends or C
 
 def parse_args(argv):
     parser = argparse.ArgumentParser(prog="python -m clnn_ros.run_all", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seed", type=int, default=DEMO["seed"])
-    parser.add_argument("--trials", type=int, default=DEMO["trials"])
-    parser.add_argument("--nsv", type=int, default=DEMO["nsv"], help="1: angle; 2: angle + cart velocity")
+    parser.add_argument("--seed", type=int, help=f"default {DEMO['seed']}; a checkpoint's own "
+                        "when resuming")
+    parser.add_argument("--trials", type=int, help=f"trials of the whole episode (default "
+                        f"{DEMO['trials']}); a resume runs those after the checkpoint's")
+    parser.add_argument("--nsv", type=int, help=f"1: angle; 2: angle + cart velocity (default "
+                        f"{DEMO['nsv']})")
     parser.add_argument("--physics", help="paper (default) or correct")
     parser.add_argument("--velocity-edge", type=float, help="2 SV: |dx/dt| edge in m/s (Table 1: 5)")
     parser.add_argument("--max-steps", type=int, help="successful steps that end a trial (10000)")
@@ -77,12 +82,19 @@ def parse_args(argv):
     parser.add_argument("--bag", type=Path, help="record every topic into this MCAP file "
                         "(default: <out>/run.mcap with --out, else bags/run_<UTC time>.mcap)")
     parser.add_argument("--no-record", action="store_true", help="do not record a bag")
+    parser.add_argument("--init-weights", metavar="FILE|fig7|fig12",
+                        help="a checkpoint .npz (e.g. <out>/checkpoint.npz): resume its episode "
+                        "at its next trial, exactly, with its seed and parameters (options "
+                        "must agree with them, but --trials); a weights .npy of shape (2, "
+                        "segments, inputs), fig7 (1 SV) or fig12 (2 SV): a new episode from "
+                        "trial 0 with those weights")
     return parser.parse_args(argv)
 
 
-def build_parameters(args) -> dict:
-    """The parameter values every node gets, validated here before any node starts."""
-    values = {}
+def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
+    """The parameter values every node gets, validated here before any node starts. Defaults:
+    the demonstration's, or a resumed checkpoint's seed and parameters."""
+    values = dict(DEMO) if checkpoint is None else checkpoint_values(checkpoint)
     if args.params_file is not None:
         values.update(read_params_file(args.params_file))
     for item in args.option:
@@ -96,11 +108,26 @@ def build_parameters(args) -> dict:
         if value is not None:
             values[key] = value
     values["progress"] = not args.quiet
+    if args.init_weights:  # the nodes get a file by its full path
+        values["init_weights"] = args.init_weights if args.init_weights in OPTIMAL else \
+            str(Path(args.init_weights).resolve())
     model = {k: v for k, v in values.items() if k not in RUN_SETTINGS}
-    params_from_strings(model)  # raises ParamError with one line
+    params = params_from_strings(model)  # raises ParamError with one line
     for key in set(values) & set(RUN_SETTINGS):
         values[key] = convert_setting(key, values[key])
+    # what each node will do with init_weights, here first: one line for what does not fit
+    start_from_setting(values["seed"], params, values.get("init_weights", ""))
     return values
+
+
+def checkpoint_values(checkpoint: Checkpoint) -> dict:
+    """A checkpoint's seed, trials and every parameter it has not at its default, as values of
+    the nodes' parameters YAML (angle edges as text, which ROS parameters take)."""
+    defaults = Params().to_dict()
+    values = {k: ",".join(map(str, v)) if isinstance(v, tuple) else v
+              for k, v in checkpoint.params.to_dict().items() if v != defaults[k]}
+    return {**values, "seed": checkpoint.seed, "trials": checkpoint.params.trials,
+            "nsv": checkpoint.params.nsv}
 
 
 def read_params_file(path: Path) -> dict:
@@ -179,8 +206,10 @@ def run_composed(values: dict, environment=EnvironmentNode) -> int:
 def main(argv=None) -> int:
     args = parse_args(argv)
     try:
-        values = build_parameters(args)
-    except ParamError as error:
+        checkpoint = load_checkpoint(args.init_weights) \
+            if args.init_weights and args.init_weights.endswith(".npz") else None
+        values = build_parameters(args, checkpoint)
+    except ParamError as error:  # a CheckpointError too
         print(f"run_all: error: {error}", file=sys.stderr)
         return 2
     module, environment = ENVIRONMENTS[args.env]
@@ -216,6 +245,14 @@ def main(argv=None) -> int:
         print(f"run_all: seed {values['seed']}, {values['trials']} trials, {values['nsv']} SV, "
               f"{mode}" + (f", environment: {args.env_node or args.env}"
                            if args.env_node or args.env != "cartpole" else ""), flush=True)
+        if checkpoint is not None:
+            print(f"run_all: resuming {args.init_weights} at trial {checkpoint.next_trial + 1} "
+                  f"of {values['trials']}"
+                  + (f" (saved at its step {checkpoint.trial_step}: the trial restarts from its "
+                     f"beginning with the weights of that moment)" if checkpoint.trial_step
+                     else ""), flush=True)
+        elif args.init_weights:
+            print(f"run_all: new episode with the weights {args.init_weights}", flush=True)
         status = run_composed(values, environment) if args.composed else \
             run_separate(values, Path(tmp), env_command)
         if recorder is not None:

@@ -1,16 +1,23 @@
 """Agent node: two RLNs. Spike vector + reward of a tick -> three-factor update, inference,
-tagging -> action. At the end of each trial it publishes its weights.
+tagging -> action. At the end of each trial it saves its checkpoint (<out_dir>/checkpoint.npz:
+the state the episode resumes from) and publishes its weights. The service
+/agent/save_checkpoint (std_srvs/Trigger) saves the state after the last completed tick to
+<out_dir>/checkpoint_<tick>.npz and answers with the path.
 
     python -m clnn_ros.nodes.agent --ros-args -p seed:=1 -p nsv:=1
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 from clnn_ros_msgs.msg import Action, Reward, SpikeVector, WeightSnapshot
+from std_srvs.srv import Trigger
 
-from ..core.episode import seed_setup
-from ..core.rln import ONE_HOT, REWARD_KINDS, RLNAgent
+from ..core.checkpoint import capture, save_checkpoint
+from ..core.episode import start_from_setting
+from ..core.rln import ONE_HOT, REWARD_KINDS
 from .common import ACTION, REWARD, SPIKES, WEIGHTS, GraphNode, TickJoin, node_main
 
 
@@ -19,9 +26,13 @@ class AgentNode(GraphNode):
         # action subscribers: environment, trial manager; weights: trial manager
         super().__init__("agent", {"action_pub": (Action, ACTION, 2),
                                    "weights_pub": (WeightSnapshot, WEIGHTS, 1)}, **options)
-        weights, _ = seed_setup(self.settings["seed"], self.params)
-        self.agent = RLNAgent(self.params, weights, seed=self.settings["seed"])
+        # the seed's weights, or those of init_weights (a checkpoint: its whole state)
+        self.agent, self.counter, self.next_trial = start_from_setting(
+            self.settings["seed"], self.params, self.settings["init_weights"])
         self.trial = -1
+        self.trial_start_tick = self.last_tick = None
+        self.trial_step = 0  # ticks of trial next_trial done: 0 between two trials
+        self.create_service(Trigger, "/agent/save_checkpoint", self.on_save_checkpoint)
         self.action_msg = Action()  # one message object, refilled each tick
         self.join = TickJoin(self, (SPIKES, REWARD), self.on_tick)
         self.subscribe(SpikeVector, SPIKES, self.on_spikes)
@@ -47,10 +58,14 @@ class AgentNode(GraphNode):
     def on_tick(self, inbox: dict) -> None:
         spikes, reward = inbox[SPIKES], inbox[REWARD]
         if reward.trial != self.trial:  # a trial's first tick: counters restart, nothing to learn
-            self.trial = reward.trial
+            self.trial, self.trial_start_tick = reward.trial, reward.tick
             self.agent.begin_trial()
         else:
             self.agent.learn(REWARD_KINDS.index(reward.kind))
+        self.counter.count = reward.success_counter  # the reward node's count, for checkpoints
+        self.last_tick = reward.tick
+        self.next_trial = reward.trial + 1 if reward.trial_over else reward.trial
+        self.trial_step = 0 if reward.trial_over else reward.tick - self.trial_start_tick + 1
         action = self.action_msg
         if reward.trial_over:  # only learn; force 0 tells the others the trial is over
             action.force_direction, action.force_n = 0, 0.0
@@ -62,10 +77,36 @@ class AgentNode(GraphNode):
             action.winning_neuron, action.winning_segment = neuron, segment
         self.action_pub.publish(self.stamp(action, reward.tick, reward.trial))
         if reward.trial_over:
+            self.save("checkpoint.npz")  # before the weights: on disk when the episode ends
             w = self.agent.weights
             self.weights_pub.publish(self.stamp(WeightSnapshot(
                 neurons=w.shape[0], segments=w.shape[1], inputs=w.shape[2],
                 weights=w.ravel().tolist()), reward.tick, reward.trial))
+
+    def save(self, name: str) -> Path | None:
+        """Save the state after the last completed tick to <out_dir>/name; None without an
+        out_dir."""
+        if not self.settings["out_dir"]:
+            return None
+        out = Path(self.settings["out_dir"])
+        out.mkdir(parents=True, exist_ok=True)
+        return save_checkpoint(out / name, capture(
+            self.agent, self.counter, self.settings["seed"], self.next_trial, self.trial_step,
+            self.last_tick))
+
+    def on_save_checkpoint(self, _request, response):
+        """Service callbacks run between two ticks' callbacks: the state after a whole tick."""
+        if self.last_tick is None:
+            response.success, response.message = False, "no tick has completed yet"
+            return response
+        try:
+            path = self.save(f"checkpoint_{self.last_tick}.npz")
+        except OSError as error:
+            path, response.message = None, f"cannot write the checkpoint: {error}"
+        else:
+            response.message = str(path) if path else "no out_dir set: nowhere to save"
+        response.success = path is not None
+        return response
 
 
 def main() -> None:

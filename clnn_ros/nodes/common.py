@@ -62,7 +62,9 @@ GRAPH_NODES = ("environment", "encoder", "reward", "agent")
 ROS_BUILTIN_PARAMETERS = {"use_sim_time", "start_type_description_service"}
 # Settings of the run that are not model parameters, with their defaults.
 RUN_SETTINGS = {"seed": 0, "stall_timeout_s": 5.0, "out_dir": "", "progress": True,
-                "extra_nodes": ""}
+                "extra_nodes": "", "init_weights": ""}
+# init_weights: "" the seed's weights; fig7, fig12 or a weights .npy: a new episode with those
+# weights; a checkpoint .npz: resume its episode (core.episode.start_from_setting).
 # extra_nodes: comma-separated names of participants that subscribe to every topic and announce
 # on /graph/ready (the recorder): each publisher waits for them too, and so does the first tick.
 

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from clnn_ros_msgs.msg import CartPoleState, Reward
 
-from ..core.rln import NONE, ONE_HOT, REWARD_KINDS, SuccessCounter
+from ..core.episode import start_from_setting
+from ..core.rln import NONE, ONE_HOT, REWARD_KINDS
 from .common import REWARD, STATE, GraphNode, TickJoin, node_main
 
 
@@ -17,7 +18,9 @@ class RewardNode(GraphNode):
     def __init__(self, **options):
         # reward subscribers: agent, trial manager
         super().__init__("reward", {"reward_pub": (Reward, REWARD, 2)}, **options)
-        self.counter = SuccessCounter(self.params)
+        # a resumed episode (init_weights: a checkpoint) continues a carried success count
+        self.counter = start_from_setting(self.settings["seed"], self.params,
+                                          self.settings["init_weights"])[1]
         self.trial = -1
         self.reward_msg = Reward()  # one message object, refilled each tick
         self.join = TickJoin(self, (STATE,), self.on_tick)

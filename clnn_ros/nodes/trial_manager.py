@@ -22,7 +22,7 @@ from clnn_ros_msgs.msg import Action, CartPoleState, Reward, SpikeVector, TrialE
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
-from ..core.episode import seed_setup
+from ..core.episode import seed_setup, start_from_setting
 from .common import (ACTION, CLOCK, GRAPH_NODES, READY, READY_QOS, REWARD, SPIKES, STATE,
                      TRIAL_EVENT, WEIGHTS, GraphNode, TickJoin, node_main)
 
@@ -44,7 +44,9 @@ class TrialManagerNode(GraphNode):
         self.final_weights = None
         self.weights_tick = None
         self.last_trial_tick = None  # set when the last trial is over
-        self.trial = 0
+        # a resumed episode (init_weights: a checkpoint) starts at the checkpoint's next trial
+        self.trial = start_from_setting(self.settings["seed"], self.params,
+                                        self.settings["init_weights"])[2]
         self.started_at = None
         self.ready = set()
         self.last_tick = {topic: -1 for topic, _ in CHAIN}
@@ -136,7 +138,7 @@ class TrialManagerNode(GraphNode):
             return
         steps = [r[2] for r in self.results]
         rate = tick / max(time.monotonic() - self.started_at, 1e-9)
-        print(f"trial {len(steps):4d}/{len(self.angles)}  steps {steps[-1]:6d}  "
+        print(f"trial {self.trial + 1:4d}/{len(self.angles)}  steps {steps[-1]:6d}  "
               f"mean {np.mean(steps):8.1f}  {rate:7.0f} ticks/s", flush=True)
 
     def interrupted(self) -> None:
