@@ -1,0 +1,182 @@
+"""Repeatability and isolation of the real graph, and the graph spread over two hosts.
+
+Every run here happens inside a private network namespace that has lo and one end of a veth link
+(clnn_ros.two_hosts.veth_link), so the kernel's packet counter of that link shows whether DDS sent
+anything off loopback. Three runs of one seed are bit-identical (results and every recorded
+message); with the default settings nothing leaves loopback, with ROS_AUTOMATIC_DISCOVERY_RANGE=
+SUBNET (the control) packets do; two graphs started at once on two domain ids do not see each
+other; the environment node across the link gives the one-host results (python -m
+clnn_ros.two_hosts)."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from clnn_ros import bag
+from clnn_ros.core.episode import run_episode
+from clnn_ros.core.params import Params
+from clnn_ros.nodes.common import STATE
+from clnn_ros.two_hosts import veth_link
+
+from test_graph import read_steps
+from test_recording import assert_every_tick, raw_messages
+
+DOMAIN_IDS = [str(70 + os.getpid() % 10 * 2 + i) for i in (0, 1)]  # two ids within 70-89
+TRIALS, MAX_STEPS = 8, 1500
+RUN_TIMEOUT_S = 120
+
+
+def namespaces_missing() -> str | None:
+    """Why network namespaces cannot be used here (None: they can)."""
+    if os.geteuid() != 0:
+        return "network namespaces need root"
+    probe = subprocess.run(["unshare", "--net", "true"], capture_output=True, text=True)
+    if probe.returncode != 0:
+        return f"unshare --net fails: {probe.stderr.strip()}"
+    return None
+
+
+NAMESPACES_MISSING = namespaces_missing()
+pytestmark = pytest.mark.skipif(NAMESPACES_MISSING is not None,
+                                reason=f"{NAMESPACES_MISSING}: no namespace tests")
+
+
+@pytest.fixture(scope="module")
+def link():
+    with veth_link() as created:
+        yield created
+
+
+@pytest.fixture(scope="module")
+def base_env(tmp_path_factory):
+    """The caller's environment without any DDS discovery choice, so that run_all's own default
+    (clnn_ros/rosenv.py) is what is tested."""
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_STATIC_PEERS")}
+    return {**env, "ROS_LOG_DIR": str(tmp_path_factory.mktemp("ros_log"))}
+
+
+def run_graphs(link, runs) -> int:
+    """Start every (out dir, seed, environment) run at once with run_all inside the link's host
+    A; wait for all. Returns the packets host A sent on the link meanwhile."""
+    sent_before = link.packets(0)[0]
+    processes = [subprocess.Popen(
+        link.exec_prefix(0) + [sys.executable, "-m", "clnn_ros.run_all", "--quiet", "--seed",
+                               str(seed), "--trials", str(TRIALS), "--max-steps", str(MAX_STEPS),
+                               "--stall-timeout", "20", "--out", str(out)],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        for out, seed, env in runs]
+    for process in processes:
+        _, stderr = process.communicate(timeout=RUN_TIMEOUT_S)
+        assert process.returncode == 0, stderr
+    return link.packets(0)[0] - sent_before
+
+
+@pytest.fixture(scope="module")
+def default_run(link, base_env, tmp_path_factory):
+    out = tmp_path_factory.mktemp("default")
+    return out, run_graphs(link, [(out, 1, {**base_env, "ROS_DOMAIN_ID": DOMAIN_IDS[0]})])
+
+
+@pytest.fixture(scope="module")
+def subnet_run(link, base_env, tmp_path_factory):
+    out = tmp_path_factory.mktemp("subnet")
+    return out, run_graphs(link, [(out, 1, {**base_env, "ROS_DOMAIN_ID": DOMAIN_IDS[0],
+                                            "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET"})])
+
+
+@pytest.fixture(scope="module")
+def concurrent_runs(link, base_env, tmp_path_factory):
+    """Seed 1 on one domain id and seed 2 on another, started at the same time."""
+    outs = [tmp_path_factory.mktemp(f"domain_{d}") for d in DOMAIN_IDS]
+    sent = run_graphs(link, [(out, seed, {**base_env, "ROS_DOMAIN_ID": domain})
+                             for out, seed, domain in zip(outs, (1, 2), DOMAIN_IDS)])
+    return outs, sent
+
+
+def assert_equals_core(out: Path, seed: int):
+    core = run_episode(seed, Params(trials=TRIALS, max_steps=MAX_STEPS))
+    assert read_steps(out) == core.steps.tolist()
+    np.testing.assert_array_equal(np.load(out / "final_weights.npy"), core.final_weights)
+
+
+def recorded(out: Path) -> dict[str, list]:
+    """topic -> [(publish time = sim time, decoded message)] in the order recorded (one publisher
+    per topic). Not the log time: it is the wall clock. Not the CDR bytes either: Fast CDR leaves
+    the alignment padding between fields uninitialized, so equal messages may differ there."""
+    from rclpy.serialization import deserialize_message
+    by_topic = defaultdict(list)
+    for _, topic, publish_time, _, data in raw_messages(out / "run.mcap"):
+        message_type = bag.message_class(bag.TOPIC_TYPES[topic])
+        by_topic[topic].append((publish_time, deserialize_message(data, message_type)))
+    return dict(by_topic)
+
+
+def test_default_settings_send_nothing_off_loopback(link, default_run, concurrent_runs):
+    shown = subprocess.run(["ip", "-n", link.namespaces[0], "-o", "link", "show"],
+                           capture_output=True, text=True, check=True).stdout
+    interfaces = {re.match(r"\d+: ([^:@]+)", line).group(1) for line in shown.splitlines()}
+    assert interfaces == {"lo", link.devices[0]}  # the counted link is the only way out
+    out, sent = default_run
+    assert sent == 0
+    assert_equals_core(out, 1)
+    assert concurrent_runs[1] == 0
+
+
+def test_subnet_discovery_sends_on_the_link(subnet_run):
+    """The control: the same check fails when discovery may leave loopback."""
+    out, sent = subnet_run
+    assert sent > 0
+    assert_equals_core(out, 1)
+
+
+def test_three_runs_of_a_seed_are_bit_identical(default_run, subnet_run, concurrent_runs):
+    """Seed 1 alone, alone with SUBNET discovery, and beside another graph: the same trials, the
+    same final weights file and the same recorded messages on every topic."""
+    runs = [default_run[0], subnet_run[0], concurrent_runs[0][0]]
+    first = recorded(runs[0])
+    assert set(first) == set(bag.TOPIC_TYPES) and len(first[STATE]) > TRIALS
+    for out in runs[1:]:
+        assert (out / "trials.csv").read_bytes() == (runs[0] / "trials.csv").read_bytes()
+        assert (out / "final_weights.npy").read_bytes() == \
+            (runs[0] / "final_weights.npy").read_bytes()
+        assert recorded(out) == first
+
+
+def test_two_graphs_at_once_on_two_domains_do_not_see_each_other(concurrent_runs):
+    (seed_1, seed_2), _ = concurrent_runs
+    assert_equals_core(seed_1, 1)
+    assert_equals_core(seed_2, 2)
+    states = []
+    for out in (seed_1, seed_2):
+        messages = raw_messages(out / "run.mcap")
+        assert_every_tick(messages)
+        ticks = [m[2] for m in messages if m[1] == STATE]
+        assert len(ticks) == len(set(ticks))  # one state per tick: no second graph's
+        states.append({m[4] for m in messages if m[1] == STATE})
+    assert not states[0] & states[1]  # a sample reaches every reader with the same bytes
+
+
+def test_environment_on_another_host_equals_one_host(base_env, tmp_path):
+    """python -m clnn_ros.two_hosts: the environment node in its own namespace, reached over
+    the veth link with SUBNET discovery; both runs equal the core and the link carried every
+    tick's state."""
+    run = subprocess.run([sys.executable, "-m", "clnn_ros.two_hosts", "--seed", "1", "--trials",
+                          str(TRIALS), "--max-steps", str(MAX_STEPS), "--out", str(tmp_path)],
+                         env={**base_env, "ROS_DOMAIN_ID": DOMAIN_IDS[0]}, capture_output=True,
+                         text=True, timeout=2 * RUN_TIMEOUT_S)
+    assert run.returncode == 0, run.stderr
+    summary = run.stdout.splitlines()[-1]
+    assert summary.startswith("two_hosts: equal results"), summary
+    for out in (tmp_path / "one_host", tmp_path / "two_hosts"):
+        assert_equals_core(out, 1)
+    ticks, sent = map(int, re.search(r"(\d+) ticks\).*sent (\d+) and", summary).groups())
+    assert sent >= ticks  # each tick's state crossed the link
