@@ -64,7 +64,8 @@ def save_checkpoint(path: str | os.PathLike, checkpoint: Checkpoint) -> Path:
     """Write `checkpoint` to `path` (.npz); the file is replaced at once (a crash while writing
     leaves the previous one). Returns the path."""
     path = Path(path)
-    params = {k: list(v) if isinstance(v, tuple) else v for k, v in checkpoint.params.to_dict().items()}
+    params = {k: list(v) if isinstance(v, tuple) else v
+              for k, v in checkpoint.params.to_dict().items()}
     arrays = {f"agent_{name}": value for name, value in checkpoint.agent.items()}
     scalars = {name: np.int64(getattr(checkpoint, name)) for name in SCALARS}
     partial = path.with_name(path.name + ".partial")
@@ -112,16 +113,17 @@ def check_resumable(checkpoint: Checkpoint, params: Params, seed: int) -> None:
     """A resume continues the same episode: same seed and parameters (only the number of trials
     may change) and at least one trial left. CheckpointError with one line otherwise."""
     if seed != checkpoint.seed:
-        raise CheckpointError(f"the checkpoint continues seed {checkpoint.seed}, this run has seed {seed}")
+        raise CheckpointError(f"the checkpoint continues seed {checkpoint.seed}, this run has "
+                              f"seed {seed}")
     saved, wanted = checkpoint.params.to_dict(), params.to_dict()
     differ = [k for k in saved if k != "trials" and saved[k] != wanted[k]]
     if differ:
-        raise CheckpointError(f"the checkpoint was saved with " + ", ".join(
+        raise CheckpointError("the checkpoint was saved with " + ", ".join(
             f"{k}={saved[k]!r} (this run: {wanted[k]!r})" for k in differ)
             + "; a resume keeps every parameter but trials")
     if checkpoint.next_trial >= params.trials:
-        raise CheckpointError(f"the checkpoint resumes at trial {checkpoint.next_trial} (counted from "
-                              f"0), the episode has only trials={params.trials}")
+        raise CheckpointError(f"the checkpoint resumes at trial {checkpoint.next_trial + 1}, "
+                              f"after the episode's trials={params.trials}: nothing left to run")
 
 
 def restore(checkpoint: Checkpoint) -> tuple[RLNAgent, SuccessCounter]:

@@ -25,7 +25,8 @@ from typing import Callable
 
 import numpy as np
 
-from .checkpoint import Checkpoint, capture, check_resumable, load_checkpoint, load_weights, restore
+from .checkpoint import (Checkpoint, capture, check_resumable, load_checkpoint, load_weights,
+                         restore)
 from .encoder import Encoder
 from .params import Params
 from .physics import CONTINUE, CartPole
@@ -95,7 +96,8 @@ def start_episode(seed: int, p: Params, weights: np.ndarray | None = None,
     return *restore(resume), resume.next_trial
 
 
-def start_from_setting(seed: int, p: Params, init_weights: str) -> tuple[RLNAgent, SuccessCounter, int]:
+def start_from_setting(seed: int, p: Params,
+                       init_weights: str) -> tuple[RLNAgent, SuccessCounter, int]:
     """start_episode from the run setting `init_weights`: "" the seed's weights; "fig7", "fig12"
     or a weights .npy: a new episode with those weights; a checkpoint .npz: resume it.
     CheckpointError (a ParamError) with one line for a file or name that does not fit."""

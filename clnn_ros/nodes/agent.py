@@ -17,8 +17,10 @@ from std_srvs.srv import Trigger
 
 from ..core.checkpoint import capture, save_checkpoint
 from ..core.episode import start_from_setting
-from ..core.rln import ONE_HOT, REWARD_KINDS
+from ..core.rln import REWARD_KINDS
 from .common import ACTION, REWARD, SPIKES, WEIGHTS, GraphNode, TickJoin, node_main
+
+SAVE_CHECKPOINT = "/agent/save_checkpoint"  # std_srvs/Trigger: save now, answer the path
 
 
 class AgentNode(GraphNode):
@@ -32,28 +34,12 @@ class AgentNode(GraphNode):
         self.trial = -1
         self.trial_start_tick = self.last_tick = None
         self.trial_step = 0  # ticks of trial next_trial done: 0 between two trials
-        self.create_service(Trigger, "/agent/save_checkpoint", self.on_save_checkpoint)
+        self.create_service(Trigger, SAVE_CHECKPOINT, self.on_save_checkpoint)
         self.action_msg = Action()  # one message object, refilled each tick
         self.join = TickJoin(self, (SPIKES, REWARD), self.on_tick)
-        self.subscribe(SpikeVector, SPIKES, self.on_spikes)
-        self.subscribe(Reward, REWARD, self.on_reward)
-
-    def on_spikes(self, msg: SpikeVector) -> None:
-        spikes = msg.spikes
-        if len(spikes) != self.params.n_inputs:
-            self.refuse(SPIKES, msg, f"{len(spikes)} spikes, the network has "
-                                     f"{self.params.n_inputs} inputs")
-        elif max(spikes, default=0) > 1 or sum(spikes) != self.params.nsv:
-            self.refuse(SPIKES, msg, f"not a 1-hot code per state variable: {list(msg.spikes)}")
-        else:
-            self.join.offer(SPIKES, msg)
-
-    def on_reward(self, msg: Reward) -> None:
-        if msg.kind not in REWARD_KINDS or tuple(msg.reward_one_hot) != \
-                ONE_HOT[REWARD_KINDS.index(msg.kind)]:
-            self.refuse(REWARD, msg, f"kind {msg.kind!r} with code {list(msg.reward_one_hot)}")
-        else:
-            self.join.offer(REWARD, msg)
+        # content rules (1-hot spikes, consistent reward code): GraphNode.subscribe
+        self.subscribe(SpikeVector, SPIKES, lambda msg: self.join.offer(SPIKES, msg))
+        self.subscribe(Reward, REWARD, lambda msg: self.join.offer(REWARD, msg))
 
     def on_tick(self, inbox: dict) -> None:
         spikes, reward = inbox[SPIKES], inbox[REWARD]
