@@ -18,7 +18,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shlex
+import shutil
 import signal
 import subprocess
 import sys
@@ -34,7 +36,8 @@ from .core.checkpoint import OPTIMAL, Checkpoint, load_checkpoint
 from .core.episode import start_from_setting
 from .core.params import ParamError, Params, params_from_strings
 from .nodes.agent import AgentNode
-from .nodes.common import (RUN_SETTINGS, catch_signals, convert_setting, make_executor, ros_session,
+from .nodes.common import (RUN_SETTINGS, catch_signals, convert_setting, make_executor,
+                           read_params_file, ros_session,
                            spin_until_finished)
 from .nodes import recorder as recorder_node
 from .nodes.encoder import EncoderNode
@@ -49,11 +52,21 @@ DEMO = dict(seed=0, trials=20, nsv=1)
 # --env: the environment node (docs/ENV_CONTRACT.md): module and class for composed mode.
 ENVIRONMENTS = {"cartpole": ("clnn_ros.nodes.environment", EnvironmentNode),
                 "gymnasium": ("clnn_ros.nodes.gymnasium_env", GymnasiumEnvironmentNode)}
+# --env-node: a command starting with one of these runs with run_all's interpreter (its venv).
+PYTHON_NAMES = ("python", "python3")
 SHUTDOWN_GRACE_S = 5.0  # how long nodes get to exit after the episode ends or Ctrl-C
 
 
+class OneLineArgumentParser(argparse.ArgumentParser):
+    """Errors as one line `run_all: error: ...` and exit status 2 (argparse: usage + error)."""
+
+    def error(self, message):
+        self.exit(2, f"run_all: error: {message}\n")
+
+
 def parse_args(argv):
-    parser = argparse.ArgumentParser(prog="python -m clnn_ros.run_all", description=__doc__.split("\n\n")[0])
+    parser = OneLineArgumentParser(prog="python -m clnn_ros.run_all",
+                                   description=__doc__.split("\n\n")[0])
     parser.add_argument("--seed", type=int, help=f"default {DEMO['seed']}; a checkpoint's own "
                         "when resuming")
     parser.add_argument("--trials", type=int, help=f"trials of the whole episode (default "
@@ -76,8 +89,9 @@ def parse_args(argv):
                              "--ros-args --params-file <the run's params> appended; it must keep "
                              "docs/ENV_CONTRACT.md; a leading 'python' is run_all's interpreter)")
     parser.add_argument("--out", type=Path, help="write trials.csv, final_weights.npy, summary.json")
-    parser.add_argument("--stall-timeout", type=float, default=RUN_SETTINGS["stall_timeout_s"],
-                        help="seconds without progress before the graph is declared stalled")
+    parser.add_argument("--stall-timeout", type=float,
+                        help="seconds without progress before the graph is declared stalled "
+                             f"(default {RUN_SETTINGS['stall_timeout_s']:g})")
     parser.add_argument("--quiet", action="store_true", help="no per-trial progress lines")
     parser.add_argument("--bag", type=Path, help="record every topic into this MCAP file "
                         "(default: <out>/run.mcap with --out, else bags/run_<UTC time>.mcap)")
@@ -88,7 +102,49 @@ def parse_args(argv):
                         "must agree with them, but --trials); a weights .npy of shape (2, "
                         "segments, inputs), fig7 (1 SV) or fig12 (2 SV): a new episode from "
                         "trial 0 with those weights")
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    check_paths_and_commands(parser, args)
+    return args
+
+
+def check_paths_and_commands(parser: argparse.ArgumentParser, args) -> None:
+    """What the nodes would find out only after they started: --out, --bag and --env-node."""
+    if args.out is not None:
+        if args.out.exists() and not args.out.is_dir():
+            parser.error(f"--out {args.out} is a file; expected a directory (created if missing)")
+        if problem := cannot_create(args.out):
+            parser.error(f"--out {args.out}: {problem}")
+    if args.bag is not None:
+        if args.no_record:
+            parser.error("--bag names the recording that --no-record turns off: give one of them")
+        if args.bag.is_dir():
+            parser.error(f"--bag {args.bag} is a directory; expected an MCAP file path")
+        if problem := cannot_create(args.bag.parent):
+            parser.error(f"--bag {args.bag}: {problem}")
+    if args.env_node is not None:
+        try:
+            command = shlex.split(args.env_node)
+        except ValueError as error:
+            parser.error(f"--env-node {args.env_node!r}: {error}")
+        if not command:
+            parser.error("--env-node needs a command, e.g. \"python examples/noisy_cartpole.py\"")
+        if args.composed:
+            parser.error("--env-node runs its own process: not with --composed")
+        if command[0] not in PYTHON_NAMES and shutil.which(command[0]) is None:
+            parser.error(f"--env-node: no program {command[0]!r} found")
+
+
+def cannot_create(directory: Path) -> str | None:
+    """Why `directory` can neither be used nor created, or None: it, or else its nearest
+    existing ancestor, must be a writable directory."""
+    existing = directory.absolute()
+    while not existing.exists():
+        existing = existing.parent
+    if not existing.is_dir():
+        return f"{existing} is not a directory"
+    if not os.access(existing, os.W_OK | os.X_OK):
+        return f"{existing} is not writable"
+    return None
 
 
 def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
@@ -101,18 +157,27 @@ def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
         key, sep, value = item.partition("=")
         if not sep:
             raise ParamError(f"--option expects KEY=VALUE, got {item!r}")
-        values[key.strip()] = yaml.safe_load(value)
+        try:
+            values[key.strip()] = yaml.safe_load(value)
+        except yaml.YAMLError:
+            values[key.strip()] = value  # not YAML: the text, which the check below refuses
     for key, value in (("seed", args.seed), ("trials", args.trials), ("nsv", args.nsv),
                        ("physics", args.physics), ("velocity_edge", args.velocity_edge),
                        ("max_steps", args.max_steps), ("stall_timeout_s", args.stall_timeout)):
         if value is not None:
             values[key] = value
-    values["progress"] = not args.quiet
+    if args.quiet:
+        values["progress"] = False
     if args.init_weights:  # the nodes get a file by its full path
         values["init_weights"] = args.init_weights if args.init_weights in OPTIMAL else \
             str(Path(args.init_weights).resolve())
     model = {k: v for k, v in values.items() if k not in RUN_SETTINGS}
     params = params_from_strings(model)  # raises ParamError with one line
+    if args.velocity_edge is not None and params.nsv == 1:
+        raise ParamError("--velocity-edge needs --nsv 2 (1 SV encodes the pole angle only)")
+    # The nodes get the checked values: rcl refuses e.g. a list mixing ints and floats.
+    values.update({k: list(v) if isinstance(v, tuple) else v
+                   for k, v in params.to_dict().items() if k in model})
     for key in set(values) & set(RUN_SETTINGS):
         values[key] = convert_setting(key, values[key])
     # what each node will do with init_weights, here first: one line for what does not fit
@@ -128,21 +193,6 @@ def checkpoint_values(checkpoint: Checkpoint) -> dict:
               for k, v in checkpoint.params.to_dict().items() if v != defaults[k]}
     return {**values, "seed": checkpoint.seed, "trials": checkpoint.params.trials,
             "nsv": checkpoint.params.nsv}
-
-
-def read_params_file(path: Path) -> dict:
-    try:
-        document = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as error:
-        raise ParamError(f"cannot read params file {path}: {str(error).splitlines()[0]}") from None
-    sections = [v.get("ros__parameters") for v in (document or {}).values()
-                if isinstance(v, dict)] if isinstance(document, dict) else []
-    if not sections or not all(isinstance(s, dict) for s in sections):
-        raise ParamError(f"params file {path} has no '<node>: ros__parameters:' mapping")
-    merged = {}
-    for section in sections:
-        merged.update(section)
-    return merged
 
 
 def run_separate(values: dict, workdir: Path, env_command: list[str]) -> int:
@@ -220,14 +270,9 @@ def main(argv=None) -> int:
         return 2
     env_command = [sys.executable, "-m", module]
     if args.env_node is not None:
-        env_command = shlex.split(args.env_node)
-        if env_command[:1] in (["python"], ["python3"]):  # the interpreter (venv) of run_all
+        env_command = shlex.split(args.env_node)  # checked by parse_args
+        if env_command[0] in PYTHON_NAMES:
             env_command[0] = sys.executable
-        if not env_command or args.composed:
-            print("run_all: error: --env-node needs a command" if not env_command else
-                  "run_all: error: --env-node runs its own process: not with --composed",
-                  file=sys.stderr)
-            return 2
     with tempfile.TemporaryDirectory(prefix="clnn_ros_") as tmp:
         out = args.out or Path(tmp) / "out"
         values["out_dir"] = str(out.resolve())

@@ -1,5 +1,5 @@
 """The real ROS 2 graph (real processes, real DDS on loopback) against the core: equal results,
-stall detection, refused messages, bad parameters and Ctrl-C."""
+stall detection, refused messages and Ctrl-C (bad parameters: test_bad_input.py)."""
 
 from __future__ import annotations
 
@@ -112,27 +112,6 @@ def test_malformed_messages_are_refused(ros_env, tmp_path):
     core = run_episode(2, Params(trials=16, max_steps=1500))
     assert read_steps(tmp_path) == core.steps.tolist()
     np.testing.assert_array_equal(np.load(tmp_path / "final_weights.npy"), core.final_weights)
-
-
-@pytest.mark.parametrize("args, message", [
-    (["--option", "sigma=-1"], "sigma must be a positive integer"),
-    (["--nsv", "3"], "nsv must be one of 1, 2"),
-    (["--physics", "quantum"], "physics must be one of"),
-    (["--option", "wmax=9"], "unknown parameter 'wmax'"),
-    (["--stall-timeout", "-1"], "stall_timeout_s must be a number >= 0"),
-])
-def test_bad_parameters_stop_before_any_node_starts(ros_env, args, message):
-    result = run_all(ros_env, *args, timeout=30)
-    assert result.returncode == 2
-    assert message in result.stderr and "Traceback" not in result.stderr
-    assert len(result.stderr.strip().splitlines()) == 1
-
-
-def test_a_node_with_a_bad_parameter_exits_with_one_line(ros_env):
-    result = subprocess.run([sys.executable, "-m", "clnn_ros.nodes.agent", "--ros-args", "-p",
-                             "omega:=-5"], env=ros_env, capture_output=True, text=True, timeout=30)
-    assert result.returncode == 2
-    assert result.stderr.strip() == "agent.py: error: omega must be a positive integer, got -5"
 
 
 def wait_for_line(stream, text: str, timeout: float = 60.0) -> str:

@@ -91,8 +91,9 @@ class Params:
             raise ParamError(f"segments must be an integer from 1 to 64, got {segments!r}")
         for name in ("sigma", "omega", "trials", "max_steps", "n_angles"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ParamError(f"{name} must be a positive integer, got {value!r}")
+            # Counts travel in the messages' uint32 fields (trial, successful_steps).
+            if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value < 2**31:
+                raise ParamError(f"{name} must be a positive integer below 2**31, got {value!r}")
         positive = ("w_max", "cart_mass", "pole_mass", "pole_length", "gravity", "tau",
                     "angle_limit_deg", "track_limit_m", "velocity_edge")
         non_negative = ("rho_plus", "rho_minus", "punish", "w_base", "w_range", "force",
@@ -120,8 +121,6 @@ class Params:
         if not all(abs(e) < self.angle_limit_deg for e in edges):
             raise ParamError(f"angle_edges_deg must lie inside +-angle_limit_deg "
                              f"({self.angle_limit_deg:g}), got {list(edges)}")
-        if self.max_steps >= 2**31:
-            raise ParamError(f"max_steps must be < 2**31, got {self.max_steps}")
 
     def replace(self, **changes) -> "Params":
         """A copy with some values changed (validated again)."""

@@ -18,11 +18,15 @@ import os
 import signal
 import sys
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Callable, Iterator
 
 from .. import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
 
 import rclpy
+import rclpy.logging
+import yaml
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
@@ -151,21 +155,52 @@ def read_parameters(node: Node) -> tuple[Params, dict]:
     return params, settings
 
 
-def convert_setting(name: str, value):
-    default = RUN_SETTINGS[name]
-    if isinstance(default, bool):
-        if not isinstance(value, bool):
-            raise ParamError(f"{name} must be true or false, got {value!r}")
-        return value
-    if isinstance(default, str):
-        return str(value)
+def read_params_file(path) -> dict:
+    """The parameters of a ROS 2 parameters YAML (`<node>: {ros__parameters: {...}}`, every
+    node's section merged), or one ParamError line: rcl itself takes some bad files silently
+    (a file without any `ros__parameters` section) and refuses others with a traceback."""
     try:
-        converted = type(default)(value)
-    except (TypeError, ValueError):
-        raise ParamError(f"{name} must be a number, got {value!r}") from None
-    if isinstance(value, bool) or converted < 0 or converted != converted:
-        raise ParamError(f"{name} must be a number >= 0, got {value!r}")
-    return converted
+        document = yaml.safe_load(Path(path).read_text())
+    except (OSError, UnicodeDecodeError) as error:
+        raise ParamError(f"cannot read params file {path}: {error}") from None
+    except yaml.YAMLError as error:
+        mark = getattr(error, "problem_mark", None)
+        where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark else ""
+        raise ParamError(f"params file {path} is not valid YAML: "
+                         f"{getattr(error, 'problem', None) or error}{where}") from None
+    sections = [v.get("ros__parameters") for v in document.values()
+                if isinstance(v, dict)] if isinstance(document, dict) else []
+    if not sections or not all(isinstance(s, dict) for s in sections):
+        raise ParamError(f"params file {path} must map node names to 'ros__parameters:' "
+                         f"mappings, e.g. '/**: {{ros__parameters: {{sigma: 256}}}}'")
+    merged = {}
+    for section in sections:
+        merged.update(section)
+    return merged
+
+
+def convert_setting(name: str, value):
+    """A run setting (RUN_SETTINGS) from the command line, a ROS parameter or YAML, checked:
+    its default's type (text of a number counts as the number), else one ParamError line."""
+    default = RUN_SETTINGS[name]
+    if isinstance(default, (bool, str)):
+        if type(value) is not type(default):
+            expected = "true or false" if isinstance(default, bool) else "text"
+            raise ParamError(f"{name} must be {expected}, got {value!r}")
+        return value
+    if isinstance(value, str):
+        try:
+            value = int(value, 10) if isinstance(default, int) else float(value)
+        except ValueError:
+            pass  # refused below with the text itself
+    if isinstance(default, int):  # the seed: TrialEvent.seed is a uint32
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 2**32:
+            raise ParamError(f"{name} must be an integer from 0 to 2**32-1, got {value!r}")
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+            not 0 < value < float("inf"):
+        raise ParamError(f"{name} must be a finite number > 0, got {value!r}")
+    return float(value)
 
 
 def make_executor(context=None):
@@ -196,11 +231,56 @@ def ros_session(argv: list[str] | None = None) -> Iterator[list[int]]:
     """rclpy for one process: SIGINT and SIGTERM are recorded (catch_signals) instead of being
     handled by rclpy, and rclpy is shut down on the way out. Yields the signals received."""
     signals = catch_signals()
-    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    init_rclpy(sys.argv if argv is None else argv)
     try:
         yield signals
     finally:
         rclpy.try_shutdown()
+
+
+ROS_ARGS_USAGE = "expected --ros-args [-p name:=value] [--params-file FILE] [--log-level LEVEL]"
+
+
+def init_rclpy(argv: list[str]) -> None:
+    """rclpy.init with SIGINT/SIGTERM left to catch_signals. ROS arguments that rcl refuses (a
+    bad -p rule, an unknown argument, a params file it cannot parse or that holds no
+    parameters) end the process with one line `<prog>: error: ...` and exit status 2."""
+    prog = os.path.basename(argv[0]) if argv else "rclpy"
+    arguments = ros_arguments(argv)
+    try:
+        for option, value in zip(arguments, arguments[1:]):
+            if option == "--params-file":
+                read_params_file(value)
+        previous = rclpy.logging.get_logger_level("rcl")
+        rclpy.logging.set_logger_level("rcl", rclpy.logging.LoggingSeverity.FATAL)  # silent refusal
+        try:
+            rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+        finally:
+            if rclpy.logging.get_logger_level("rcl") == rclpy.logging.LoggingSeverity.FATAL:
+                rclpy.logging.set_logger_level("rcl", previous)  # unless --log-level set it
+    except ParamError as error:
+        message = str(error)
+    except _rclpy.UnknownROSArgsError as error:
+        message = f"unknown ROS arguments {error}; {ROS_ARGS_USAGE}"
+    except _rclpy.RCLError as error:
+        # rcl: "failed to initialize rcl: <what>, at <source file>:<line>, ..."
+        reason = str(error).removeprefix("failed to initialize rcl: ").split(", at /")[0]
+        message = f"{' '.join(reason.split())}; {ROS_ARGS_USAGE}"
+    else:
+        return
+    print(f"{prog}: error: {message}", file=sys.stderr)
+    raise SystemExit(2)
+
+
+def ros_arguments(argv: list[str]) -> list[str]:
+    """The tokens rcl reads: those between --ros-args and the next -- (or the end)."""
+    tokens, inside = [], False
+    for token in argv:
+        if token in ("--ros-args", "--"):
+            inside = token == "--ros-args"
+        elif inside:
+            tokens.append(token)
+    return tokens
 
 
 def spin_until_finished(executor, finished: Future, signals: list[int]) -> None:
