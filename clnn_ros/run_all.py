@@ -186,11 +186,9 @@ def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
 
 
 def checkpoint_values(checkpoint: Checkpoint) -> dict:
-    """A checkpoint's seed, trials and every parameter it has not at its default, as values of
-    the nodes' parameters YAML (angle edges as text, which ROS parameters take)."""
+    """A checkpoint's seed, trials and every parameter it has not at its default."""
     defaults = Params().to_dict()
-    values = {k: ",".join(map(str, v)) if isinstance(v, tuple) else v
-              for k, v in checkpoint.params.to_dict().items() if v != defaults[k]}
+    values = {k: v for k, v in checkpoint.params.to_dict().items() if v != defaults[k]}
     return {**values, "seed": checkpoint.seed, "trials": checkpoint.params.trials,
             "nsv": checkpoint.params.nsv}
 
