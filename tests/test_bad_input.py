@@ -106,7 +106,7 @@ RUN_ALL_CASES = [  # (arguments, what the one error line says)
 SUBPROCESS_CASES = {"--seed abc", "--trials 0", "--out file.txt", "--bag file.txt/run.mcap",
                     "--params-file malformed.yaml", "--env-node no_such_program_clnn"}
 
-NODE_CASES = [  # (node, ROS arguments, what the one error line says)
+NODE_CASES = [  # (node, its arguments after --ros-args, what the one error line says)
     ("agent", ["-p", "omega:=-5"], "omega must be a positive integer below 2**31, got -5"),
     ("agent", ["-p", "sigmaa:=3"], "unknown parameter 'sigmaa'"),
     ("agent", ["-p", "sigma:=abc"], "sigma must be an integer, got 'abc'"),
@@ -123,6 +123,8 @@ NODE_CASES = [  # (node, ROS arguments, what the one error line says)
     ("trial_manager", ["--unknown-ros-flag"], "unknown ROS arguments ['--unknown-ros-flag']"),
     ("trial_manager", ["--log-level", "loud"], "Couldn't parse log level"),
     ("gymnasium_env", ["-p", "tau:=0.01"], "tau must be gymnasium's 0.02 s"),
+    # a params file outside the ROS arguments (here after their end, --): rclpy ignores it
+    ("agent", ["--", "--params-file", "nan.yaml"], "unexpected arguments ['--params-file'"),
 ]
 
 
@@ -164,7 +166,8 @@ def run_all_in_process(args: list[str], capsys) -> tuple[int, str]:
     return status, capsys.readouterr().err
 
 
-@pytest.mark.parametrize("args, message", RUN_ALL_CASES, ids=[" ".join(a) for a, _ in RUN_ALL_CASES])
+@pytest.mark.parametrize("args, message", RUN_ALL_CASES,
+                         ids=[" ".join(a) for a, _ in RUN_ALL_CASES])
 def test_run_all_refuses_bad_input_before_starting_anything(workdir, capsys, args, message):
     before = listing(workdir)
     start = cpu_seconds()
@@ -189,7 +192,7 @@ def test_every_subprocess_case_is_a_case():
                          ids=[f"{n} {' '.join(a)}" for n, a, _ in NODE_CASES])
 def test_a_node_started_by_hand_refuses_bad_parameters(workdir, node, ros_args, message):
     result = subprocess.run([sys.executable, "-m", f"clnn_ros.nodes.{node}", "--ros-args",
-                             *ros_args], capture_output=True, text=True, timeout=30)
+                             *ros_args], capture_output=True, text=True, timeout=60)
     assert result.returncode == 2, result.stderr
     assert_one_error_line(result.stderr, f"{node}.py", message)
 

@@ -246,7 +246,7 @@ def init_rclpy(argv: list[str]) -> None:
     bad -p rule, an unknown argument, a params file it cannot parse or that holds no
     parameters) end the process with one line `<prog>: error: ...` and exit status 2."""
     prog = os.path.basename(argv[0]) if argv else "rclpy"
-    arguments = ros_arguments(argv)
+    arguments = split_ros_arguments(argv)[0]
     try:
         for option, value in zip(arguments, arguments[1:]):
             if option == "--params-file":
@@ -264,23 +264,24 @@ def init_rclpy(argv: list[str]) -> None:
         message = f"unknown ROS arguments {error}; {ROS_ARGS_USAGE}"
     except _rclpy.RCLError as error:
         # rcl: "failed to initialize rcl: <what>, at <source file>:<line>, ..."
-        reason = str(error).removeprefix("failed to initialize rcl: ").split(", at /")[0]
-        message = f"{' '.join(reason.split())}; {ROS_ARGS_USAGE}"
+        reason = " ".join(str(error).removeprefix("failed to initialize rcl: ")
+                          .split(", at /")[0].split())
+        message = f"{reason}; {ROS_ARGS_USAGE}" if reason.startswith("Couldn't parse") else reason
     else:
         return
     print(f"{prog}: error: {message}", file=sys.stderr)
     raise SystemExit(2)
 
 
-def ros_arguments(argv: list[str]) -> list[str]:
-    """The tokens rcl reads: those between --ros-args and the next -- (or the end)."""
-    tokens, inside = [], False
+def split_ros_arguments(argv: list[str]) -> tuple[list[str], list[str]]:
+    """(the tokens rcl reads: those between --ros-args and the next -- or the end, the others)."""
+    ros, others, inside = [], [], False
     for token in argv:
         if token in ("--ros-args", "--"):
             inside = token == "--ros-args"
-        elif inside:
-            tokens.append(token)
-    return tokens
+        else:
+            (ros if inside else others).append(token)
+    return ros, others
 
 
 def spin_until_finished(executor, finished: Future, signals: list[int]) -> None:
@@ -294,11 +295,17 @@ def node_main(factory: Callable[[], GraphNode], argv: list[str] | None = None) -
     """Run one node in its own process until the episode ends; returns the exit status.
     Bad parameters: one error line, exit 2. SIGINT/SIGTERM: clean shutdown, 130/143."""
     argv = sys.argv if argv is None else argv
+    prog = os.path.basename(argv[0])
+    unexpected = split_ros_arguments(argv)[1][1:]
+    if unexpected:  # rclpy would ignore them: e.g. a --params-file before --ros-args
+        print(f"{prog}: error: unexpected arguments {unexpected}: a node takes ROS arguments "
+              f"only, after --ros-args", file=sys.stderr)
+        return 2
     with ros_session(argv) as signals:
         try:
             node = factory()
         except ParamError as error:
-            print(f"{os.path.basename(argv[0])}: error: {error}", file=sys.stderr)
+            print(f"{prog}: error: {error}", file=sys.stderr)
             return 2
         try:
             executor = make_executor()
