@@ -67,13 +67,16 @@ class Abort(Exception):
 
 
 class Harness(Node):
-    """Trial manager + agent: publishes /clock, /trial/event and /rln/action, reads the states."""
+    """Trial manager + agent: publishes /clock, /trial/event and /rln/action, reads the states.
+    It is named like the nodes those topics come from (the graph's nodes accept an input from
+    its own publisher only): the node `trial_manager`, with a second node `agent` for actions."""
 
     def __init__(self, context):
-        super().__init__("env_contract_checker", context=context)
+        super().__init__("trial_manager", context=context)
         self.clock_pub = self.create_publisher(Clock, CLOCK, LOCKSTEP_QOS)
         self.event_pub = self.create_publisher(TrialEvent, TRIAL_EVENT, LOCKSTEP_QOS)
-        self.action_pub = self.create_publisher(Action, ACTION, LOCKSTEP_QOS)
+        self.agent = Node("agent", context=context)
+        self.action_pub = self.agent.create_publisher(Action, ACTION, LOCKSTEP_QOS)
         self.states: list[CartPoleState] = []
         self.ready: list[str] = []
         # three subscriptions: the encoder, reward and trial manager a real graph has
@@ -406,6 +409,7 @@ class Checker:
                 pass
             finally:
                 self.stop_process()
+                self.node.agent.destroy_node()
                 self.node.destroy_node()
                 rclpy.try_shutdown(context=context)
             self.states = list(self.node.states)

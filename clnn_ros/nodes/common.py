@@ -37,6 +37,9 @@ from std_msgs.msg import String
 from clnn_ros_msgs.msg import TrialEvent
 
 from ..core.params import ParamError, Params, params_from_strings
+from .publisher_gid import SubscriptionWithGid
+from .validate import (action_problem, clock_problem, event_problem, reward_problem,
+                       spikes_problem, state_problem, weights_problem)
 
 # Topics of the graph (docs/ENV_CONTRACT.md names them for environment nodes).
 CLOCK = "/clock"
@@ -47,6 +50,13 @@ REWARD = "/rln/reward"
 ACTION = "/rln/action"
 WEIGHTS = "/rln/weights"
 READY = "/graph/ready"
+# The node whose messages each input topic carries; a node accepts them from no one else.
+PUBLISHED_BY = {CLOCK: "trial_manager", TRIAL_EVENT: "trial_manager", STATE: "environment",
+                SPIKES: "encoder", REWARD: "reward", ACTION: "agent", WEIGHTS: "agent"}
+# What every subscriber of a topic refuses, whoever sent it (validate.py).
+CONTENT_RULES = {CLOCK: clock_problem, TRIAL_EVENT: event_problem, STATE: state_problem,
+                 SPIKES: spikes_problem, REWARD: reward_problem, ACTION: action_problem,
+                 WEIGHTS: weights_problem}
 
 # In lockstep a publisher is never more than a few messages ahead of any node of the graph (at
 # most END, EPISODE_END and START on /trial/event within one tick). A subscriber outside the
@@ -91,6 +101,8 @@ class GraphNode(Node):
         self.tau_ns = round(self.params.tau * 1e9)
         self.extra_nodes = {n.strip() for n in self.settings["extra_nodes"].split(",") if n.strip()}
         self.refused = 0
+        self._pinned = {}  # input topic: GIDs of the publishers its messages are accepted from
+        self._inputs = []  # SubscriptionWithGid of each input topic
         self.finished = Future()
         self._expected = []
         for attribute, (msg_type, topic, subscribers) in publishers.items():
@@ -107,12 +119,57 @@ class GraphNode(Node):
         return all(p.get_subscription_count() >= n for p, n in self._expected)
 
     def _announce_when_matched(self) -> None:
-        if self.publishers_matched():
+        if self.publishers_matched() and self.inputs_visible():
             self._ready_publisher.publish(String(data=self.get_name()))
             self._ready_timer.cancel()
 
-    def subscribe(self, msg_type, topic: str, callback: Callable) -> None:
-        self.create_subscription(msg_type, topic, callback, LOCKSTEP_QOS)
+    def subscribe(self, msg_type, topic: str, callback: Callable, event_callbacks=None) -> None:
+        """Subscribe to an input of the graph. A message goes to `callback` only if it keeps the
+        topic's content rules (CONTENT_RULES) and comes from the publisher the graph gives the
+        topic (PUBLISHED_BY); otherwise it is refused, for the first reason found."""
+        content_problem, pinned = CONTENT_RULES[topic], self._pinned.setdefault(topic, set())
+
+        def receive(msg_and_sender: tuple) -> None:
+            msg, publisher_gid = msg_and_sender
+            reason = content_problem(msg, self.params)
+            if reason is None and publisher_gid not in pinned:
+                reason = self._publisher_refusal(topic, publisher_gid)
+            if reason is None:
+                callback(msg)
+            else:
+                self.refuse(topic, msg, reason)
+        self._inputs.append(SubscriptionWithGid(self, msg_type, topic, receive, LOCKSTEP_QOS,
+                                                event_callbacks))
+
+    def destroy_node(self) -> None:
+        for subscription in self._inputs:  # before the node's timers (their doorbells) go
+            subscription.close()
+        super().destroy_node()
+
+    def inputs_visible(self) -> bool:
+        """Does the ROS graph show the publisher (PUBLISHED_BY) of each input topic yet? Then
+        its first message is known to come from it."""
+        return all(PUBLISHED_BY[topic] in self._publishers_of(topic).values()
+                   for topic in self._pinned)
+
+    def _publishers_of(self, topic: str) -> dict[bytes, str]:
+        """{GID: node name} of the topic's publishers in the ROS graph now (our namespace)."""
+        return {bytes(info.endpoint_gid): info.node_name
+                for info in self.get_publishers_info_by_topic(topic)
+                if info.node_namespace == self.get_namespace()}
+
+    def _publisher_refusal(self, topic: str, publisher_gid: bytes) -> str | None:
+        """Why a message from a publisher not pinned is refused; None after pinning it. The
+        first publisher of the expected node name to send a message on the topic is pinned, no
+        other after it (a publisher of that name that left without a word, like a killed run's
+        that the graph still lists for a while, is never pinned)."""
+        pinned, expected = self._pinned[topic], PUBLISHED_BY[topic]
+        name = self._publishers_of(topic).get(publisher_gid)
+        if name == expected and not pinned:
+            pinned.add(publisher_gid)
+            return None
+        sender = f"node '{name}'" if name else "not in the ROS graph"
+        return f"from an unknown publisher ({sender}; {topic} is accepted from '{expected}' only)"
 
     def stamp(self, msg, tick: int, trial: int):
         """Fill the common fields: header stamped with the tick's sim time, tick and trial."""

@@ -21,15 +21,8 @@ class EncoderNode(GraphNode):
         # One message object, refilled each tick (publish serializes it at once); labels fixed.
         self.spikes_msg = SpikeVector(input_labels=self.encoder.labels())
         self.join = TickJoin(self, (STATE,), self.on_tick)
-        self.subscribe(CartPoleState, STATE, self.on_state)
-
-    def on_state(self, msg: CartPoleState) -> None:
-        state = (msg.cart_position_m, msg.cart_velocity_m_per_s, msg.pole_angle_deg,
-                 msg.pole_angular_velocity_deg_per_s)
-        if all(math.isfinite(v) for v in state):
-            self.join.offer(STATE, msg)
-        else:
-            self.refuse(STATE, msg, f"non-finite state {state}")
+        # content rules (finite, consistent, in range): GraphNode.subscribe
+        self.subscribe(CartPoleState, STATE, lambda msg: self.join.offer(STATE, msg))
 
     def on_tick(self, inbox: dict) -> None:
         msg = inbox[STATE]

@@ -29,18 +29,19 @@ class EnvironmentNode(GraphNode):
         self.successful_steps = 0
         self.trial_over = True  # the first tick is a trial start
         self.over_tick = None  # tick of the last state of the trial that just ended
-        self.pending = {}  # this tick's inputs: "clock", and "start" or "action"
+        self.pending = {}  # this tick's inputs by topic: /clock, and START or the action
         self.state_msg = CartPoleState()
         self.subscribe(Clock, CLOCK, self.on_clock)
         self.subscribe(Action, ACTION, self.on_action)
 
     def on_clock(self, clock: Clock) -> None:
-        tick, rest = divmod(clock.clock.sec * 1_000_000_000 + clock.clock.nanosec, self.tau_ns)
-        if rest or tick != self.tick:
+        # a whole tick (content rules: GraphNode.subscribe)
+        tick = (clock.clock.sec * 1_000_000_000 + clock.clock.nanosec) // self.tau_ns
+        if tick != self.tick:
             self.refuse(CLOCK, clock, f"sim time {clock.clock.sec}.{clock.clock.nanosec:09d} s is "
                                       f"not tick {self.tick}")
             return
-        self._offer("clock", clock)
+        self._offer(CLOCK, clock)
 
     def on_trial_event(self, event: TrialEvent) -> None:
         super().on_trial_event(event)
@@ -49,17 +50,12 @@ class EnvironmentNode(GraphNode):
         if event.tick != self.tick or not self.trial_over:
             self.refuse(TRIAL_EVENT, event, f"START expected only at the tick after a trial "
                                             f"ends (tick {self.tick})")
-        elif not math.isfinite(event.initial_angle_deg) or abs(event.initial_angle_deg) >= \
-                self.params.angle_limit_deg:
-            self.refuse(TRIAL_EVENT, event, f"initial angle {event.initial_angle_deg} is not "
-                                            f"inside +-{self.params.angle_limit_deg} deg")
-        else:
-            self._offer("start", event)
+        else:  # the angle is inside the limit (content rules: GraphNode.subscribe)
+            self._offer(TRIAL_EVENT, event)
 
     def on_action(self, action: Action) -> None:
-        if action.force_direction not in (-1, 0, 1):
-            self.refuse(ACTION, action, f"force_direction {action.force_direction} is not -1, 0 or 1")
-        elif action.force_direction == 0:
+        # force_direction is -1, 0 or +1 (content rules: GraphNode.subscribe)
+        if action.force_direction == 0:
             # The agent's answer to a trial's last state. It travels on its own topic, so it may
             # arrive after the next trial's START and clock: match it by its tick alone.
             if action.tick != self.over_tick:
@@ -71,18 +67,18 @@ class EnvironmentNode(GraphNode):
         elif action.tick + 1 != self.tick:
             self.refuse(ACTION, action, f"expected the action of tick {self.tick - 1}")
         else:
-            self._offer("action", action)
+            self._offer(ACTION, action)
 
-    def _offer(self, name: str, msg) -> None:
-        if name in self.pending:
-            self.refuse(msg.__class__.__name__, msg, f"a second {name} for tick {self.tick}")
+    def _offer(self, topic: str, msg) -> None:
+        if topic in self.pending:
+            self.refuse(topic, msg, f"a second message for tick {self.tick}")
             return
-        self.pending[name] = msg
-        if "clock" in self.pending and ("start" in self.pending or "action" in self.pending):
+        self.pending[topic] = msg
+        if CLOCK in self.pending and (TRIAL_EVENT in self.pending or ACTION in self.pending):
             self._advance()
 
     def _advance(self) -> None:
-        start, action = self.pending.get("start"), self.pending.get("action")
+        start, action = self.pending.get(TRIAL_EVENT), self.pending.get(ACTION)
         self.pending = {}
         status = CONTINUE
         if start is not None:
