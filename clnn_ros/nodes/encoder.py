@@ -5,8 +5,6 @@
 
 from __future__ import annotations
 
-import math
-
 from clnn_ros_msgs.msg import CartPoleState, SpikeVector
 
 from ..core.encoder import Encoder

@@ -10,8 +10,6 @@ initial angle) or /rln/action(t-1) (apply the force, one physics step), publish
 
 from __future__ import annotations
 
-import math
-
 from clnn_ros_msgs.msg import Action, CartPoleState, TrialEvent
 from rosgraph_msgs.msg import Clock
 
