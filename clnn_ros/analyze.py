@@ -19,7 +19,6 @@ whose recorder was killed), 2 bad arguments (an unknown --trial).
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import sys
@@ -28,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from .bag import TOPIC_TYPES, BagError, Decoder, iter_raw, open_bag
+from .cli import OneLineArgumentParser
 from .core.params import ParamError, Params, params_from_strings
 from .nodes.common import (ACTION, CLOCK, REWARD, RUN_SETTINGS, SPIKES, STATE, TRIAL_EVENT,
                            WEIGHTS)
@@ -311,8 +311,8 @@ def summary_markdown(bag_path: Path, result: dict, salvage: bool) -> str:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m clnn_ros.analyze",
-                                     description=__doc__.split("\n\n")[0])
+    parser = OneLineArgumentParser(prog="python -m clnn_ros.analyze", name="analyze",
+                                   description=__doc__.split("\n\n")[0])
     parser.add_argument("bag", type=Path, help="an MCAP file recorded by run_all")
     parser.add_argument("--out", type=Path, help="output folder (default: <bag>_analysis)")
     parser.add_argument("--trial", type=int, help="trial to plot (default: the longest)")

@@ -14,7 +14,6 @@ unknown topic or field.
 
 from __future__ import annotations
 
-import argparse
 import array
 import sys
 import time
@@ -26,6 +25,7 @@ import yaml
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from .bag import TOPIC_TYPES, message_class
+from .cli import OneLineArgumentParser
 from .nodes.common import ros_session
 
 ECHO_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
@@ -140,8 +140,8 @@ def topic_type(node, topic: str, wait_s: float) -> str:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m clnn_ros.echo",
-                                     description=__doc__.split("\n\n")[0])
+    parser = OneLineArgumentParser(prog="python -m clnn_ros.echo", name="echo",
+                                   description=__doc__.split("\n\n")[0])
     parser.add_argument("topic")
     parser.add_argument("--once", action="store_true", help="print one message and exit")
     parser.add_argument("--field", help="print only this field, e.g. header.stamp or pole_angle_deg")

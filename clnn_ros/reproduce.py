@@ -26,6 +26,7 @@ import numpy as np
 from tqdm import tqdm
 
 from .batch import BatchResult, evaluate_weights_batch, run_batch
+from .cli import OneLineArgumentParser
 from .core.encoder import Encoder
 from .core.episode import angle_grid, run_episode, run_trial
 from .core.gym_physics import GymCartPole, gym_matched_params
@@ -937,13 +938,6 @@ def gymnasium_markdown(gym: dict, runs: dict[str, Run], physics: dict, files: li
 # ------------------------------------------------------------------------------------------------
 # Command line
 # ------------------------------------------------------------------------------------------------
-class _Parser(argparse.ArgumentParser):
-    """argparse that reports a usage error as one line (and exit status 2)."""
-
-    def error(self, message):
-        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
-
-
 OWN_FLAGS = {"nsv": "--nsv", "trials": "--trials", "velocity_edge": "--velocity-edge",
              "physics": "--physics"}
 
@@ -1020,8 +1014,9 @@ def cmd_all(args) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="python -m clnn_ros.reproduce", description=__doc__.split("\n\n")[0],
-                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = OneLineArgumentParser(prog="python -m clnn_ros.reproduce",
+                                   description=__doc__.split("\n\n")[0],
+                                   formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     c = sub.add_parser("calibrate", help="the paper's numbers (a)-(d) under every physics mode")

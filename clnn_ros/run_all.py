@@ -32,6 +32,7 @@ import yaml
 
 from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
 
+from .cli import OneLineArgumentParser
 from .core.checkpoint import OPTIMAL, Checkpoint, load_checkpoint
 from .core.episode import start_from_setting
 from .core.params import ParamError, Params, params_from_strings
@@ -57,15 +58,8 @@ PYTHON_NAMES = ("python", "python3")
 SHUTDOWN_GRACE_S = 5.0  # how long nodes get to exit after the episode ends or Ctrl-C
 
 
-class OneLineArgumentParser(argparse.ArgumentParser):
-    """Errors as one line `run_all: error: ...` and exit status 2 (argparse: usage + error)."""
-
-    def error(self, message):
-        self.exit(2, f"run_all: error: {message}\n")
-
-
 def parse_args(argv):
-    parser = OneLineArgumentParser(prog="python -m clnn_ros.run_all",
+    parser = OneLineArgumentParser(prog="python -m clnn_ros.run_all", name="run_all",
                                    description=__doc__.split("\n\n")[0])
     parser.add_argument("--seed", type=int, help=f"default {DEMO['seed']}; a checkpoint's own "
                         "when resuming")

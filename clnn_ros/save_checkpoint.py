@@ -10,7 +10,6 @@ within --wait seconds, 130 on Ctrl-C.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 
@@ -19,13 +18,15 @@ from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before r
 import rclpy
 from std_srvs.srv import Trigger
 
+from .cli import OneLineArgumentParser
 from .nodes.agent import SAVE_CHECKPOINT
 from .nodes.common import ros_session
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m clnn_ros.save_checkpoint",
-                                     description=__doc__.split("\n\n")[0])
+    parser = OneLineArgumentParser(prog="python -m clnn_ros.save_checkpoint",
+                                   name="save_checkpoint",
+                                   description=__doc__.split("\n\n")[0])
     parser.add_argument("--wait", type=float, default=10.0,
                         help="seconds to wait for the agent's answer (10)")
     args = parser.parse_args(argv)

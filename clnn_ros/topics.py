@@ -9,7 +9,6 @@ Exit status 0; 130 on Ctrl-C.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 
@@ -17,14 +16,15 @@ from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before r
 
 import rclpy
 
+from .cli import OneLineArgumentParser
 from .nodes.common import ros_session
 
 OWN = {"/parameter_events", "/rosout"}  # this tool's own node has these
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m clnn_ros.topics",
-                                     description=__doc__.split("\n\n")[0])
+    parser = OneLineArgumentParser(prog="python -m clnn_ros.topics", name="topics",
+                                   description=__doc__.split("\n\n")[0])
     parser.add_argument("--count", action="store_true",
                         help="also the number of publishers and subscribers")
     parser.add_argument("--wait", type=float, default=5.0,

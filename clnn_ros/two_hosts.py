@@ -13,7 +13,6 @@ namespaces, 130/143 interrupted.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import secrets
@@ -30,6 +29,7 @@ from typing import Iterator
 
 import numpy as np
 
+from .cli import OneLineArgumentParser
 from .nodes.common import catch_signals
 
 # Addresses of the link: private to the two namespaces, so every run may use the same ones.
@@ -149,8 +149,8 @@ def compare(one_host: Path, two_hosts: Path) -> list[str]:
 
 
 def parse_args(argv):
-    parser = argparse.ArgumentParser(prog="python -m clnn_ros.two_hosts",
-                                     description=__doc__.split("\n\n")[0])
+    parser = OneLineArgumentParser(prog="python -m clnn_ros.two_hosts", name="two_hosts",
+                                   description=__doc__.split("\n\n")[0])
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--trials", type=int, default=8)
     parser.add_argument("--max-steps", type=int, default=1500)
