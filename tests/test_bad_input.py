@@ -28,6 +28,8 @@ FILES = {
     "text.yaml": "just text\n",
     "list.yaml": "- sigma: 3\n",
     "no_mapping.yaml": "/**:\n  ros__parameters: 7\n",
+    "two_values.yaml": "agent:\n  ros__parameters: {sigma: 128}\n"
+                       "encoder:\n  ros__parameters: {sigma: 64, nsv: 1}\n",
 }
 
 
@@ -82,6 +84,8 @@ RUN_ALL_CASES = [  # (arguments, what the one error line says)
     (["--params-file", "text.yaml"], "must map node names to 'ros__parameters:' mappings"),
     (["--params-file", "list.yaml"], "must map node names to 'ros__parameters:' mappings"),
     (["--params-file", "no_mapping.yaml"], "must map node names to 'ros__parameters:'"),
+    (["--params-file", "two_values.yaml"],
+     "gives sigma two values (128 for agent, 64 for encoder)"),
     (["--params-file", params_yaml("unknown.yaml", "sigmaa: 3")], "unknown parameter 'sigmaa'"),
     (["--params-file", params_yaml("list_value.yaml", "omega: [1, 2]")],
      "omega must be an integer, got [1, 2]"),
@@ -119,6 +123,7 @@ NODE_CASES = [  # (node, its arguments after --ros-args, what the one error line
     ("reward", ["--params-file", "text.yaml"], "must map node names to 'ros__parameters:'"),
     ("environment", ["--params-file", "unknown.yaml"], "unknown parameter 'sigmaa'"),
     ("environment", ["--params-file", "nan.yaml"], "gravity must be a finite number, got nan"),
+    ("encoder", ["--params-file", "two_values.yaml"], "gives sigma two values"),
     ("trial_manager", ["-p", "stall_timeout_s:=0"], "stall_timeout_s must be a finite number > 0"),
     ("trial_manager", ["--unknown-ros-flag"], "unknown ROS arguments ['--unknown-ros-flag']"),
     ("trial_manager", ["--log-level", "loud"], "Couldn't parse log level"),
