@@ -4,3 +4,29 @@ DDS discovery stays on the loopback interface unless the user chose otherwise.""
 import os
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+
+
+SHM = "/dev/shm"
+
+
+def fast_dds_shm_files() -> set[str]:
+    """Names of Fast DDS shared-memory files (segments, port queues, their locks)."""
+    return {name for name in os.listdir(SHM) if "fastrtps_" in name}
+
+
+def shm_files_in_use() -> set[str]:
+    """Names under /dev/shm that some process has mapped or open. A Fast DDS file no process
+    uses is left over by a process that was killed (`fastdds shm clean` removes those)."""
+    used = set()
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            with open(f"/proc/{pid}/maps") as maps:
+                used.update(line.rsplit(SHM + "/", 1)[1].split()[0]
+                            for line in maps if SHM + "/" in line)
+            for fd in os.listdir(f"/proc/{pid}/fd"):
+                target = os.readlink(f"/proc/{pid}/fd/{fd}")
+                if target.startswith(SHM + "/"):
+                    used.add(target[len(SHM) + 1:])
+        except OSError:
+            continue  # the process ended, or is not ours to read
+    return used

@@ -53,9 +53,6 @@ DEMO = dict(seed=0, trials=20, nsv=1)
 # --env: the environment node (docs/ENV_CONTRACT.md): module and class for composed mode.
 ENVIRONMENTS = {"cartpole": ("clnn_ros.nodes.environment", EnvironmentNode),
                 "gymnasium": ("clnn_ros.nodes.gymnasium_env", GymnasiumEnvironmentNode)}
-# Run settings that run_all sets itself: a value given would be overwritten (out_dir) or make
-# the graph wait for a participant that never comes (extra_nodes, the recorder's name).
-RUN_ALL_SETS = {"out_dir": "--out", "extra_nodes": "--bag / --no-record"}
 # --env-node: a command starting with one of these runs with run_all's interpreter (its venv).
 PYTHON_NAMES = ("python", "python3")
 SHUTDOWN_GRACE_S = 5.0  # how long nodes get to exit after the episode ends or Ctrl-C
@@ -163,9 +160,6 @@ def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
                        ("max_steps", args.max_steps), ("stall_timeout_s", args.stall_timeout)):
         if value is not None:
             values[key] = value
-    for name, option in RUN_ALL_SETS.items():
-        if name in values:
-            raise ParamError(f"{name} is set by run_all ({option}), not as a parameter")
     if args.quiet:
         values["progress"] = False
     if args.init_weights:  # the nodes get a file by its full path
@@ -203,17 +197,19 @@ def run_separate(values: dict, workdir: Path, env_command: list[str]) -> int:
         processes[name] = subprocess.Popen(
             [*command, "--ros-args", "--params-file", str(params_file), "--log-level", "warn"])
     interrupted = catch_signals()
+    manager = processes["trial_manager"]
     try:
-        while processes["trial_manager"].poll() is None and not interrupted:
+        while manager.poll() is None and not interrupted:
             time.sleep(0.05)
-        for process in processes.values():
-            if interrupted and process.poll() is None:
-                process.send_signal(signal.SIGINT)
+        if interrupted or manager.returncode < 0:  # no EPISODE_END came: stop the graph now
+            for process in processes.values():
+                if process.poll() is None:
+                    process.send_signal(signal.SIGINT)
     finally:
         stop_all(processes)
     if interrupted:
         return 128 + interrupted[0]
-    return processes["trial_manager"].returncode
+    return manager.returncode
 
 
 def stop_all(processes: dict) -> None:
@@ -274,7 +270,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory(prefix="clnn_ros_") as tmp:
         out = args.out or Path(tmp) / "out"
         values["out_dir"] = str(out.resolve())
-        bag_path = recorder = None
+        bag_path = recorder = died = None
         if not args.no_record:  # the recorder: its own process, also in composed mode
             bag_path = args.bag or recorder_node.default_bag_path(args.out)
             try:
@@ -300,6 +296,9 @@ def main(argv=None) -> int:
             run_separate(values, Path(tmp), env_command)
         if recorder is not None:
             recorder_node.stop(recorder, status)
+        if status < 0:
+            died = f"the trial manager died ({signal.Signals(-status).name})"
+            status = 1
         summary_file = out / "summary.json"
         summary = json.loads(summary_file.read_text()) if summary_file.exists() else {}
         if summary:
@@ -313,7 +312,8 @@ def main(argv=None) -> int:
     if status in (128 + signal.SIGINT, 128 + signal.SIGTERM):
         print("run_all: interrupted", file=sys.stderr)
     elif status != 0:
-        reason = summary.get("exit_reason") or f"the trial manager exited with status {status}"
+        reason = died or summary.get("exit_reason") or \
+            f"the trial manager exited with status {status}"
         print(f"run_all: error: {reason}", file=sys.stderr)
     return status
 

@@ -4,7 +4,8 @@
 
 BUG: no_reset (successful_steps not reset at START), wrong_tick (the state of tick 2 and later
 is published with the tick one too high), no_exit (ignores EPISODE_END), accept_bad_force
-(applies force_direction 5 as +F), silent (never announces readiness).
+(applies force_direction 5 as +F), silent (never announces readiness), mute (stops publishing
+states at tick 50 but stays alive).
 """
 
 import sys
@@ -41,6 +42,12 @@ class BrokenEnvironmentNode(EnvironmentNode):
         if "no_reset" in BUGS and value == 0 and hasattr(self, "_steps"):
             return  # forgets to reset the count at START
         self._steps = value
+
+    def _advance(self) -> None:
+        if "mute" in BUGS and self.tick >= 50:
+            self.pending = {}
+            return
+        super()._advance()
 
     def stamp(self, msg, tick: int, trial: int):
         if "wrong_tick" in BUGS and tick >= 2:

@@ -1,5 +1,5 @@
 """Recording (clnn_ros.nodes.recorder via run_all), reading the bag with two independent readers,
-faults (Ctrl-C, a killed agent, a killed recorder) and the offline analysis (clnn_ros.analyze)."""
+faults (Ctrl-C, a killed recorder) and the offline analysis (clnn_ros.analyze)."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ import pytest
 import yaml
 
 from clnn_ros import bag
-from clnn_ros.nodes.common import STATE, TRIAL_EVENT
+from clnn_ros.nodes.common import STATE
 
 from test_graph import processes_with, wait_for_line
 
@@ -60,14 +60,21 @@ def raw_messages(path: Path, salvage=False):
         return list(bag.iter_raw(reader))
 
 
+def gaps(ticks: list[int]) -> str:
+    """The first few departures of sorted ticks from 0, 1, 2, ... (a short assertion message)."""
+    wrong = [(i, t) for i, t in enumerate(ticks) if t != i][:3]
+    return f"{len(ticks)} ticks, first departures (position, tick): {wrong}"
+
+
 def assert_every_tick(messages, topics=PER_TICK, last_state_tick=None):
     """Each per-tick topic holds every tick from 0 to the last state's tick, no gap."""
     ticks = {t: sorted(tick_of(m[2]) for m in messages if m[1] == t) for t in topics}
     last = ticks[STATE][-1] if last_state_tick is None else last_state_tick
-    assert ticks[STATE] == list(range(last + 1))
+    assert ticks[STATE] == list(range(last + 1)), f"{STATE}: {gaps(ticks[STATE])}"
     for topic in topics:
-        assert ticks[topic][:last] == list(range(min(last, len(ticks[topic])))), topic
-        assert len(ticks[topic]) >= last  # the last tick's later messages may be missing
+        head = ticks[topic][:last]
+        assert head == list(range(len(head))), f"{topic}: {gaps(ticks[topic])}"
+        assert len(ticks[topic]) >= last, topic  # the last tick's later messages may be missing
     return last
 
 
@@ -246,20 +253,6 @@ def test_echo_topics_then_ctrl_c_leaves_a_complete_bag(ros_env, tmp_path):
     assert process.returncode == 130 and "Traceback" not in stderr, stderr
     messages = raw_messages(tmp_path / "run.mcap")  # finished: summary and index present
     assert assert_every_tick(messages) > 50
-    assert not processes_with(str(tmp_path))
-
-
-def test_killed_agent_leaves_a_complete_bag_up_to_the_fault(ros_env, tmp_path):
-    process = start_run(ros_env, tmp_path, "--stall-timeout", "2")
-    wait_for_line(process.stdout, "trial    2/")
-    os.kill(child(process, "clnn_ros.nodes.agent"), signal.SIGKILL)
-    _, stderr = process.communicate(timeout=30)
-    assert process.returncode == 1 and "stall: node 'agent' went silent" in stderr
-    messages = raw_messages(tmp_path / "run.mcap")
-    last = assert_every_tick(messages, ("/clock", STATE, "/rln/spikes", "/rln/reward"))
-    events = [bag.deserialize(TRIAL_EVENT, m[4]) for m in messages if m[1] == TRIAL_EVENT]
-    assert events[-1].event == 2 and "stall" in events[-1].end_reason
-    assert events[-1].tick == last  # the tick that never completed: its action never came
     assert not processes_with(str(tmp_path))
 
 

@@ -30,7 +30,9 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.duration import Duration
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile,
+                       ReliabilityPolicy)
 from rclpy.task import Future
 from std_msgs.msg import String
 
@@ -60,10 +62,25 @@ CONTENT_RULES = {CLOCK: clock_problem, TRIAL_EVENT: event_problem, STATE: state_
 
 # In lockstep a publisher is never more than a few messages ahead of any node of the graph (at
 # most END, EPISODE_END and START on /trial/event within one tick). A subscriber outside the
-# lockstep (the recorder, echo) may lag: the publisher's history keeps the last 2000 messages
-# for it (about 2 s of the graph), so a recorder starved of CPU for a while loses nothing.
+# lockstep (echo, the recorder) may lag: the publisher's history keeps the last 2000 messages
+# for it (about 1 s of the graph); the recorder also holds the graph back (RECORDER_WINDOW).
+# Liveliness: DDS asserts each publisher alive on its own; a process killed outright is
+# declared not alive to its subscribers within the lease, which is how the trial manager tells
+# a dead node (docs/ROS_GRAPH.md) from a slow one.
+LIVELINESS_LEASE = Duration(seconds=1.0)
 LOCKSTEP_QOS = QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE,
-                          history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
+                          history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE,
+                          liveliness=LivelinessPolicy.AUTOMATIC,
+                          liveliness_lease_duration=LIVELINESS_LEASE)
+# The recorder's progress (the last tick it holds on every per-tick topic): the trial manager
+# keeps the graph at most RECORDER_WINDOW ticks ahead of it, far less than the publishers'
+# history, so a slow recorder slows the graph down instead of losing messages.
+RECORDED = "/recorder/progress"
+RECORDER_WINDOW = 500
+PROGRESS_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                          history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE,
+                          liveliness=LivelinessPolicy.AUTOMATIC,
+                          liveliness_lease_duration=LIVELINESS_LEASE)
 # A readiness announcement must reach a trial manager that starts later than the node; the
 # depth keeps every node's announcement when several arrive at once.
 READY_QOS = QoSProfile(depth=16, reliability=ReliabilityPolicy.RELIABLE,
@@ -215,8 +232,7 @@ def read_parameters(node: Node) -> tuple[Params, dict]:
 def read_params_file(path) -> dict:
     """The parameters of a ROS 2 parameters YAML (`<node>: {ros__parameters: {...}}`, every
     node's section merged), or one ParamError line: rcl itself takes some bad files silently
-    (a file without any `ros__parameters` section) and refuses others with a traceback. The
-    graph's nodes share their parameters, so two sections must not give a name two values."""
+    (a file without any `ros__parameters` section) and refuses others with a traceback."""
     try:
         document = yaml.safe_load(Path(path).read_text())
     except (OSError, UnicodeDecodeError) as error:
@@ -226,19 +242,14 @@ def read_params_file(path) -> dict:
         where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark else ""
         raise ParamError(f"params file {path} is not valid YAML: "
                          f"{getattr(error, 'problem', None) or error}{where}") from None
-    sections = {node: v.get("ros__parameters") for node, v in document.items()
-                if isinstance(v, dict)} if isinstance(document, dict) else {}
-    if not sections or not all(isinstance(s, dict) for s in sections.values()):
+    sections = [v.get("ros__parameters") for v in document.values()
+                if isinstance(v, dict)] if isinstance(document, dict) else []
+    if not sections or not all(isinstance(s, dict) for s in sections):
         raise ParamError(f"params file {path} must map node names to 'ros__parameters:' "
                          f"mappings, e.g. '/**: {{ros__parameters: {{sigma: 256}}}}'")
-    merged, given_by = {}, {}
-    for node, section in sections.items():
-        for name, value in section.items():
-            if name in merged and merged[name] != value:
-                raise ParamError(f"params file {path} gives {name} two values ({merged[name]!r} "
-                                 f"for {given_by[name]}, {value!r} for {node}); the graph's "
-                                 f"nodes share their parameters")
-            merged[name], given_by[name] = value, node
+    merged = {}
+    for section in sections:
+        merged.update(section)
     return merged
 
 

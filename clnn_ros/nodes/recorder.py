@@ -5,7 +5,9 @@
 It subscribes raw (the CDR bytes, never decoded) to /clock, /trial/event, /cartpole/state,
 /rln/spikes, /rln/reward, /rln/action and /rln/weights with a deep reader queue, and announces
 "recorder" on /graph/ready once each subscription sees its publisher; run_all makes the trial
-manager wait for it (run setting extra_nodes), so the first tick is recorded. The file is
+manager wait for it (run setting extra_nodes), so the first tick is recorded. Every 20 ms it
+publishes on /recorder/progress the last tick it holds on every per-tick topic; the trial manager
+keeps the graph within RECORDER_WINDOW ticks of it, so a slow recorder loses nothing. The file is
 finished (rosbag2 metadata, summary, index) on EPISODE_END (a normal end, or a stall the trial
 manager detected), on Ctrl-C and on SIGTERM. Complete chunks are flushed as they fill, so a
 SIGKILL loses at most the open chunk. Parameters from --params-file (the run's) are stored in
@@ -28,12 +30,13 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from rclpy.task import Future
-from std_msgs.msg import String
+from std_msgs.msg import String, UInt64
 
 from clnn_ros_msgs.msg import TrialEvent
 
 from .. import bag
-from .common import READY, READY_QOS, TRIAL_EVENT, make_executor, ros_session, spin_until_finished
+from .common import (PROGRESS_QOS, READY, READY_QOS, RECORDED, TRIAL_EVENT, make_executor,
+                     ros_session, spin_until_finished)
 
 NAME = "recorder"
 PER_TICK = ("/clock", "/cartpole/state", "/rln/spikes", "/rln/reward", "/rln/action")
@@ -81,6 +84,8 @@ class RecorderNode(Node):
         self.episode_end_at = None
         self.last_message_at = time.monotonic()
         self._ready_publisher = self.create_publisher(String, READY, READY_QOS)
+        self._progress_publisher = self.create_publisher(UInt64, RECORDED, PROGRESS_QOS)
+        self._progress = UInt64()
         self._timer = self.create_timer(0.02, self._poll)
         self.closed = False
 
@@ -122,14 +127,17 @@ class RecorderNode(Node):
         return receive
 
     def _poll(self) -> None:
-        """Announce readiness once every subscription sees its publisher; after EPISODE_END,
-        finish when no message came for LINGER_S."""
+        """Announce readiness once every subscription sees its publisher; report progress;
+        after EPISODE_END, finish when no message came for LINGER_S."""
         if self._ready_publisher is not None:
             if all(s.get_publisher_count() >= 1 for s in self.subscriptions_by_topic.values()):
                 for topic in bag.TOPIC_TYPES:
                     self._channel(topic)
                 self._ready_publisher.publish(String(data=NAME))
                 self._ready_publisher = None
+        if len(self.last_tick) == len(PER_TICK):  # sent each time: a lost one is replaced
+            self._progress.data = min(self.last_tick.values()) // self.tau_ns
+            self._progress_publisher.publish(self._progress)
         if self.episode_end_at is not None:
             now = time.monotonic()
             if now - self.last_message_at > LINGER_S or now - self.episode_end_at > LINGER_MAX_S:
@@ -211,7 +219,7 @@ def stop(process, status: int, grace_s: float = 5.0) -> None:
     no EPISODE_END came (the trial manager itself died), it is told to finish the file."""
     import signal
     import subprocess
-    if status in (130, 143) and process.poll() is None:
+    if (status in (130, 143) or status < 0) and process.poll() is None:
         process.send_signal(signal.SIGINT)
     for sig, wait_s in ((None, grace_s), (signal.SIGTERM, 10.0), (signal.SIGKILL, 5.0)):
         if sig is not None and process.poll() is None:

@@ -7,7 +7,10 @@ trials, ends the episode, reports progress, and detects a stalled graph.
 Tick t is done when it holds the environment's state(t) and the agent's action(t); then it
 publishes /clock(t+1), preceded by END/START (or EPISODE_END) events when the trial is over.
 When no tick completes for `stall_timeout_s`, it names the first node of the tick's chain whose
-message is missing, ends the episode and exits with status 1.
+message is missing, ends the episode and exits with status 1. A node whose process dies (its
+publishers lose DDS liveliness, within about a second) or leaves the graph ends the episode the
+same way, named at once. With a recorder it keeps the clock at most RECORDER_WINDOW ticks ahead
+of the recorder's progress, so that no message is lost to a slow recorder.
 """
 
 from __future__ import annotations
@@ -19,12 +22,14 @@ from pathlib import Path
 
 import numpy as np
 from clnn_ros_msgs.msg import Action, CartPoleState, Reward, SpikeVector, TrialEvent, WeightSnapshot
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rosgraph_msgs.msg import Clock
-from std_msgs.msg import String
+from std_msgs.msg import String, UInt64
 
 from ..core.episode import seed_setup, start_from_setting
-from .common import (ACTION, CLOCK, GRAPH_NODES, READY, READY_QOS, REWARD, SPIKES, STATE,
-                     TRIAL_EVENT, WEIGHTS, GraphNode, TickJoin, node_main)
+from .common import (ACTION, CLOCK, GRAPH_NODES, PROGRESS_QOS, READY, READY_QOS, RECORDED,
+                     RECORDER_WINDOW, REWARD, SPIKES, STATE, TRIAL_EVENT, WEIGHTS, GraphNode,
+                     TickJoin, node_main)
 
 STARTUP_TIMEOUT_S = 60.0  # process start, imports and discovery of the whole graph
 # Who publishes what within a tick, in causal order: the first one missing went silent.
@@ -53,12 +58,17 @@ class TrialManagerNode(GraphNode):
         self.last_progress = time.monotonic()
         self.exit_reason = ""
         self.join = TickJoin(self, (STATE, ACTION), self.on_tick)
-        self.subscribe(CartPoleState, STATE, self.seen(STATE))
-        self.subscribe(SpikeVector, SPIKES, self.seen(SPIKES))
-        self.subscribe(Reward, REWARD, self.seen(REWARD))
-        self.subscribe(Action, ACTION, self.seen(ACTION))
+        self.subscribe(CartPoleState, STATE, self.seen(STATE), self.watch("environment"))
+        self.subscribe(SpikeVector, SPIKES, self.seen(SPIKES), self.watch("encoder"))
+        self.subscribe(Reward, REWARD, self.seen(REWARD), self.watch("reward"))
+        self.subscribe(Action, ACTION, self.seen(ACTION), self.watch("agent"))
         self.subscribe(WeightSnapshot, WEIGHTS, self.on_weights)
         self.create_subscription(String, READY, self.on_ready, READY_QOS)
+        self.recorded_tick = -1
+        self.held = None  # (tick, starts a trial): the next tick, waiting for the recorder
+        if "recorder" in self.extra_nodes:
+            self.create_subscription(UInt64, RECORDED, self.on_recorded, PROGRESS_QOS,
+                                     event_callbacks=self.watch("recorder"))
         self.watchdog = self.create_timer(0.1, self.check)
 
     def seen(self, topic: str):
@@ -70,6 +80,28 @@ class TrialManagerNode(GraphNode):
 
     def on_ready(self, msg: String) -> None:
         self.ready.add(msg.data)
+
+    def watch(self, node: str) -> SubscriptionEventCallbacks:
+        """Liveliness of a topic's publisher: lost (the process died) or gone (it left the graph)
+        during the episode ends it, naming the node."""
+        def changed(info) -> None:
+            if self.started_at is None or self.finished.done():
+                return
+            if info.not_alive_count_change > 0:
+                self.stop(1, f"node '{node}' died at tick {self.join.tick} (its publishers lost "
+                             f"liveliness)")
+            elif info.alive_count_change < 0 and info.alive_count == 0:
+                self.stop(1, f"node '{node}' left the graph at tick {self.join.tick}")
+        return SubscriptionEventCallbacks(liveliness=changed)
+
+    def on_recorded(self, msg: UInt64) -> None:
+        if msg.data > self.recorded_tick and self.held is not None:
+            self.last_progress = time.monotonic()  # a slow recorder is not a stalled one
+        self.recorded_tick = max(self.recorded_tick, msg.data)
+        if self.held is not None and self.held[0] <= self.recorded_tick + RECORDER_WINDOW:
+            tick, starts_trial = self.held
+            self.held = None
+            self.advance(tick, starts_trial)
 
     def on_weights(self, msg: WeightSnapshot) -> None:
         self.final_weights = np.array(msg.weights).reshape(msg.neurons, msg.segments, msg.inputs)
@@ -88,22 +120,29 @@ class TrialManagerNode(GraphNode):
         if self.started_at is None:
             if self.publishers_matched() and self.ready >= set(GRAPH_NODES) | self.extra_nodes:
                 self.started_at = self.last_progress = now
-                self.start_trial(0)
+                self.advance(0, starts_trial=True)
             elif now - self.last_progress > STARTUP_TIMEOUT_S:
                 missing = sorted((set(GRAPH_NODES) | self.extra_nodes) - self.ready) or [
                     "(subscriptions of /clock or /trial/event)"]
                 self.stop(1, f"graph not ready after {STARTUP_TIMEOUT_S:.0f} s: "
                              f"waiting for {', '.join(missing)}")
         elif now - self.last_progress > self.settings["stall_timeout_s"]:
-            silent = next((node for topic, node in CHAIN if self.last_tick[topic] < self.join.tick),
-                          "agent")  # all of the tick is in: only the final weights are missing
+            silent = "recorder" if self.held is not None else next(
+                (node for topic, node in CHAIN if self.last_tick[topic] < self.join.tick),
+                "agent")  # all of the tick is in: only the final weights are missing
             self.stop(1, f"stall: node '{silent}' went silent at tick {self.join.tick} "
                          f"(no progress for {self.settings['stall_timeout_s']:g} s)")
 
-    def start_trial(self, tick: int) -> None:
-        self.event_pub.publish(self.stamp(TrialEvent(
-            event=TrialEvent.START, initial_angle_deg=float(self.angles[self.trial]),
-            seed=self.settings["seed"]), tick, self.trial))
+    def advance(self, tick: int, starts_trial: bool) -> None:
+        """Publish tick `tick` (START first if it starts a trial), unless the recorder is more
+        than RECORDER_WINDOW ticks behind: then hold it until the recorder's progress comes."""
+        if "recorder" in self.extra_nodes and tick > self.recorded_tick + RECORDER_WINDOW:
+            self.held = (tick, starts_trial)
+            return
+        if starts_trial:
+            self.event_pub.publish(self.stamp(TrialEvent(
+                event=TrialEvent.START, initial_angle_deg=float(self.angles[self.trial]),
+                seed=self.settings["seed"]), tick, self.trial))
         self.publish_clock(tick)
 
     def publish_clock(self, tick: int) -> None:
@@ -116,7 +155,7 @@ class TrialManagerNode(GraphNode):
         self.last_progress = time.monotonic()
         tick = state.tick
         if action.force_direction != 0:
-            self.publish_clock(tick + 1)
+            self.advance(tick + 1, starts_trial=False)
             return
         reason = state.failure_reason or "max_steps"
         self.results.append((self.trial, float(self.angles[self.trial]), state.successful_steps,
@@ -128,7 +167,7 @@ class TrialManagerNode(GraphNode):
         self.report(tick)
         if self.trial + 1 < len(self.angles):
             self.trial += 1
-            self.start_trial(tick + 1)
+            self.advance(tick + 1, starts_trial=True)
         else:
             self.last_trial_tick = tick
             self.finish_when_weights_arrive()
