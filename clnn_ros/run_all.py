@@ -53,6 +53,9 @@ DEMO = dict(seed=0, trials=20, nsv=1)
 # --env: the environment node (docs/ENV_CONTRACT.md): module and class for composed mode.
 ENVIRONMENTS = {"cartpole": ("clnn_ros.nodes.environment", EnvironmentNode),
                 "gymnasium": ("clnn_ros.nodes.gymnasium_env", GymnasiumEnvironmentNode)}
+# Run settings that run_all sets itself: a value given would be overwritten (out_dir) or make
+# the graph wait for a participant that never comes (extra_nodes, the recorder's name).
+RUN_ALL_SETS = {"out_dir": "--out", "extra_nodes": "--bag / --no-record"}
 # --env-node: a command starting with one of these runs with run_all's interpreter (its venv).
 PYTHON_NAMES = ("python", "python3")
 SHUTDOWN_GRACE_S = 5.0  # how long nodes get to exit after the episode ends or Ctrl-C
@@ -160,6 +163,9 @@ def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
                        ("max_steps", args.max_steps), ("stall_timeout_s", args.stall_timeout)):
         if value is not None:
             values[key] = value
+    for name, option in RUN_ALL_SETS.items():
+        if name in values:
+            raise ParamError(f"{name} is set by run_all ({option}), not as a parameter")
     if args.quiet:
         values["progress"] = False
     if args.init_weights:  # the nodes get a file by its full path

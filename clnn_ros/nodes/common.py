@@ -232,7 +232,8 @@ def read_parameters(node: Node) -> tuple[Params, dict]:
 def read_params_file(path) -> dict:
     """The parameters of a ROS 2 parameters YAML (`<node>: {ros__parameters: {...}}`, every
     node's section merged), or one ParamError line: rcl itself takes some bad files silently
-    (a file without any `ros__parameters` section) and refuses others with a traceback."""
+    (a file without any `ros__parameters` section) and refuses others with a traceback. The
+    graph's nodes share their parameters, so two sections must not give a name two values."""
     try:
         document = yaml.safe_load(Path(path).read_text())
     except (OSError, UnicodeDecodeError) as error:
@@ -242,14 +243,19 @@ def read_params_file(path) -> dict:
         where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark else ""
         raise ParamError(f"params file {path} is not valid YAML: "
                          f"{getattr(error, 'problem', None) or error}{where}") from None
-    sections = [v.get("ros__parameters") for v in document.values()
-                if isinstance(v, dict)] if isinstance(document, dict) else []
-    if not sections or not all(isinstance(s, dict) for s in sections):
+    sections = {node: v.get("ros__parameters") for node, v in document.items()
+                if isinstance(v, dict)} if isinstance(document, dict) else {}
+    if not sections or not all(isinstance(s, dict) for s in sections.values()):
         raise ParamError(f"params file {path} must map node names to 'ros__parameters:' "
                          f"mappings, e.g. '/**: {{ros__parameters: {{sigma: 256}}}}'")
-    merged = {}
-    for section in sections:
-        merged.update(section)
+    merged, given_by = {}, {}
+    for node, section in sections.items():
+        for name, value in section.items():
+            if name in merged and merged[name] != value:
+                raise ParamError(f"params file {path} gives {name} two values ({merged[name]!r} "
+                                 f"for {given_by[name]}, {value!r} for {node}); the graph's "
+                                 f"nodes share their parameters")
+            merged[name], given_by[name] = value, node
     return merged
 
 
