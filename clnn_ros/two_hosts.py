@@ -1,7 +1,7 @@
 """Two hosts on one machine: the environment node in one network namespace ("robot"), the rest of
 the graph in another ("brain"), joined by a veth pair with addresses of their own; DDS discovery
-is restricted to that link. Runs the same episode on one host and across the link, checks that the
-results are equal and prints both throughputs (docs/MULTI_HOST.md).
+is restricted to that link. Runs the same episode across the link, then on one host, checks that
+the results are equal and prints both throughputs (docs/MULTI_HOST.md).
 
     python -m clnn_ros.two_hosts --seed 1 --trials 8 --max-steps 1500 --out DIR
 
@@ -69,7 +69,7 @@ class Link:
 
     def packets(self, side: int) -> tuple[int, int]:
         """(sent, received) packets of host `side`'s end of the link, from the kernel's counters."""
-        shown = ip("-j", "-s", "-n", self.namespaces[side], "link", "show", "dev", self.devices[side])
+        shown = ip("-j", "-s", "-n", self.namespaces[side], "link", "show", self.devices[side])
         stats = json.loads(shown)[0]["stats64"]
         return stats["tx"]["packets"], stats["rx"]["packets"]
 
@@ -98,7 +98,8 @@ def veth_link() -> Iterator[Link]:
         ip("link", "add", link.devices[0], "type", "veth", "peer", "name", link.devices[1])
         for namespace, device, address in zip(link.namespaces, link.devices, link.addresses):
             ip("link", "set", device, "netns", namespace)
-            ip("netns", "exec", namespace, "sysctl", "-qw", f"net.ipv6.conf.{device}.disable_ipv6=1")
+            ip("netns", "exec", namespace, "sysctl", "-qw",
+               f"net.ipv6.conf.{device}.disable_ipv6=1")
             ip("-n", namespace, "addr", "add", f"{address}/{PREFIX_LENGTH}", "dev", device)
             ip("-n", namespace, "link", "set", "lo", "up")
             ip("-n", namespace, "link", "set", device, "up")
@@ -132,7 +133,7 @@ def run_graph(command: list[str], signals: list[int]) -> int:
 
 
 def run_all_command(args, out: Path) -> list[str]:
-    return [sys.executable, "-m", "clnn_ros.run_all", "--quiet", "--seed", str(args.seed),
+    return [sys.executable, "-m", "clnn_ros.run_all", "--seed", str(args.seed),
             "--trials", str(args.trials), "--max-steps", str(args.max_steps), "--nsv",
             str(args.nsv), "--stall-timeout", str(args.stall_timeout), "--out", str(out)]
 
@@ -184,12 +185,6 @@ def main(argv=None) -> int:
 
 def run_both(args, link: Link, out: Path, signals: list[int]) -> int:
     one_host, two_hosts = out / "one_host", out / "two_hosts"
-    # One host: the whole graph on host B's loopback.
-    status = run_graph(link.exec_prefix(1, {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"})
-                       + run_all_command(args, one_host), signals)
-    if status != 0:
-        print(f"two_hosts: error: the one-host run failed (status {status})", file=sys.stderr)
-        return 1
     discovery = DISCOVERY[args.discovery]
     env_node = link.exec_prefix(0, discovery(link.addresses[1])) + \
         [sys.executable, "-m", "clnn_ros.nodes.environment"]
@@ -202,12 +197,18 @@ def run_both(args, link: Link, out: Path, signals: list[int]) -> int:
     if status != 0:
         print(f"two_hosts: error: the two-host run failed (status {status})", file=sys.stderr)
         return 1
+    # One host: the whole graph on host B's loopback.
+    status = run_graph(link.exec_prefix(1, {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"})
+                       + run_all_command(args, one_host), signals)
+    if status != 0:
+        print(f"two_hosts: error: the one-host run failed (status {status})", file=sys.stderr)
+        return 1
     differences = compare(one_host, two_hosts)
     summaries = [json.loads((run / "summary.json").read_text()) for run in (one_host, two_hosts)]
     ticks = summaries[1]["ticks"]
     rates = [summary["ticks_per_s"] for summary in summaries]
-    print(f"two_hosts: {'equal results' if not differences else 'DIFFERENT ' + ', '.join(differences)}"
-          f" ({summaries[1]['trials']} trials, {ticks} ticks); {args.discovery} discovery; "
+    verdict = "equal results" if not differences else "DIFFERENT " + ", ".join(differences)
+    print(f"two_hosts: {verdict} ({summaries[1]['trials']} trials, {ticks} ticks); {args.discovery} discovery; "
           f"across the link {rates[1]:.0f} ticks/s vs one host {rates[0]:.0f} ticks/s "
           f"({rates[1] / rates[0]:.2f}x); the environment's host sent {sent} and received "
           f"{received} packets on the link ({sent / ticks:.1f} / {received / ticks:.1f} per tick)",

@@ -12,8 +12,10 @@ from __future__ import annotations
 
 import os
 import re
+import signal
 import subprocess
 import sys
+import time
 from collections import defaultdict
 from pathlib import Path
 
@@ -26,7 +28,7 @@ from clnn_ros.core.params import Params
 from clnn_ros.nodes.common import STATE
 from clnn_ros.two_hosts import veth_link
 
-from test_graph import read_steps
+from test_graph import processes_with, read_steps, wait_for_line
 from test_recording import assert_every_tick, raw_messages
 
 DOMAIN_IDS = [str(70 + os.getpid() % 10 * 2 + i) for i in (0, 1)]  # two ids within 70-89
@@ -68,15 +70,22 @@ def run_graphs(link, runs) -> int:
     """Start every (out dir, seed, environment) run at once with run_all inside the link's host
     A; wait for all. Returns the packets host A sent on the link meanwhile."""
     sent_before = link.packets(0)[0]
-    processes = [subprocess.Popen(
-        link.exec_prefix(0) + [sys.executable, "-m", "clnn_ros.run_all", "--quiet", "--seed",
-                               str(seed), "--trials", str(TRIALS), "--max-steps", str(MAX_STEPS),
-                               "--stall-timeout", "20", "--out", str(out)],
-        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        for out, seed, env in runs]
-    for process in processes:
-        _, stderr = process.communicate(timeout=RUN_TIMEOUT_S)
-        assert process.returncode == 0, stderr
+    processes = []
+    for out, seed, env in runs:
+        with open(out / "run_all.log", "w") as log:  # a file: no pipe to fill while we wait
+            processes.append(subprocess.Popen(
+                link.exec_prefix(0) + [sys.executable, "-m", "clnn_ros.run_all", "--quiet",
+                                       "--seed", str(seed), "--trials", str(TRIALS), "--max-steps",
+                                       str(MAX_STEPS), "--stall-timeout", "20", "--out", str(out)],
+                env=env, stdout=log, stderr=subprocess.STDOUT))
+    deadline = time.monotonic() + RUN_TIMEOUT_S
+    for process, (out, _, _) in zip(processes, runs):
+        try:
+            process.wait(timeout=max(0.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            process.send_signal(signal.SIGINT)  # run_all stops its graph and says where it was
+            process.wait(timeout=30)
+        assert process.returncode == 0, (out / "run_all.log").read_text()[-3000:]
     return link.packets(0)[0] - sent_before
 
 
@@ -100,6 +109,11 @@ def concurrent_runs(link, base_env, tmp_path_factory):
     sent = run_graphs(link, [(out, seed, {**base_env, "ROS_DOMAIN_ID": domain})
                              for out, seed, domain in zip(outs, (1, 2), DOMAIN_IDS)])
     return outs, sent
+
+
+def our_namespaces() -> set[str]:
+    listed = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout
+    return {line.split()[0] for line in listed.splitlines() if line.startswith("clnn_")}
 
 
 def assert_equals_core(out: Path, seed: int):
@@ -169,14 +183,41 @@ def test_environment_on_another_host_equals_one_host(base_env, tmp_path):
     """python -m clnn_ros.two_hosts: the environment node in its own namespace, reached over
     the veth link with SUBNET discovery; both runs equal the core and the link carried every
     tick's state."""
+    before = our_namespaces()
     run = subprocess.run([sys.executable, "-m", "clnn_ros.two_hosts", "--seed", "1", "--trials",
                           str(TRIALS), "--max-steps", str(MAX_STEPS), "--out", str(tmp_path)],
                          env={**base_env, "ROS_DOMAIN_ID": DOMAIN_IDS[0]}, capture_output=True,
                          text=True, timeout=2 * RUN_TIMEOUT_S)
     assert run.returncode == 0, run.stderr
+    assert our_namespaces() == before
     summary = run.stdout.splitlines()[-1]
     assert summary.startswith("two_hosts: equal results"), summary
     for out in (tmp_path / "one_host", tmp_path / "two_hosts"):
         assert_equals_core(out, 1)
     ticks, sent = map(int, re.search(r"(\d+) ticks\).*sent (\d+) and", summary).groups())
     assert sent >= ticks  # each tick's state crossed the link
+
+
+def test_ctrl_c_across_the_link_removes_everything(base_env, tmp_path):
+    """Ctrl-C while the environment node runs in the other namespace: two_hosts exits 130, and
+    no process of the run and neither namespace is left."""
+    marker = {**base_env, "ROS_DOMAIN_ID": DOMAIN_IDS[1], "CLNN_TEST_RUN": str(tmp_path)}
+    before = our_namespaces()
+    stderr_file = tmp_path / "stderr.log"  # a file: no pipe to fill while we read stdout
+    with open(stderr_file, "w") as stderr_log:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "clnn_ros.two_hosts", "--trials", "400", "--max-steps", "10000"],
+            env=marker, stdout=subprocess.PIPE, stderr=stderr_log, text=True,
+            start_new_session=True)
+    try:
+        wait_for_line(process.stdout, "environment: ip netns exec")  # the two-host run (first)
+        wait_for_line(process.stdout, "trial    2/")  # its episode is under way
+    finally:
+        os.killpg(process.pid, signal.SIGINT)  # what a terminal does on Ctrl-C
+        process.communicate(timeout=30)
+        stderr = stderr_file.read_text()
+        print(stderr)  # shown if the waits failed
+    assert process.returncode == 130, stderr
+    assert "two_hosts: interrupted" in stderr and "Traceback" not in stderr
+    assert not processes_with(str(tmp_path))
+    assert our_namespaces() == before
