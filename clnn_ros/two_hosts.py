@@ -30,7 +30,8 @@ from typing import Iterator
 import numpy as np
 
 from .cli import OneLineArgumentParser
-from .nodes.common import catch_signals
+from .core.params import ParamError, params_from_strings
+from .nodes.common import catch_signals, convert_setting
 
 # Addresses of the link: private to the two namespaces, so every run may use the same ones.
 ADDRESSES = ("10.231.0.1", "10.231.0.2")
@@ -166,8 +167,12 @@ def parse_args(argv):
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    if args.trials < 1 or args.max_steps < 1:
-        print("two_hosts: error: --trials and --max-steps must be positive", file=sys.stderr)
+    try:  # what run_all would refuse, refused before any namespace exists
+        params_from_strings({"nsv": args.nsv, "trials": args.trials, "max_steps": args.max_steps})
+        convert_setting("seed", args.seed)
+        convert_setting("stall_timeout_s", args.stall_timeout)
+    except ParamError as error:
+        print(f"two_hosts: error: {error}", file=sys.stderr)
         return 2
     signals = catch_signals()  # from here on, Ctrl-C and SIGTERM end the runs, then the namespaces
     with tempfile.TemporaryDirectory(prefix="clnn_two_hosts_") as tmp:

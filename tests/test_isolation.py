@@ -221,3 +221,18 @@ def test_ctrl_c_across_the_link_removes_everything(base_env, tmp_path):
     assert "two_hosts: interrupted" in stderr and "Traceback" not in stderr
     assert not processes_with(str(tmp_path))
     assert our_namespaces() == before
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--nsv", "3"], "nsv must be one of 1, 2"),
+    (["--seed", "-1"], "seed must be an integer from 0 to 2**32-1"),
+    (["--discovery", "carrier-pigeon"], "argument --discovery: invalid choice"),
+])
+def test_two_hosts_refuses_bad_input_before_any_namespace(args, message):
+    before = our_namespaces()
+    run = subprocess.run([sys.executable, "-m", "clnn_ros.two_hosts", *args], capture_output=True,
+                         text=True, timeout=30)
+    assert run.returncode == 2
+    assert run.stderr.startswith("two_hosts: error: ") and message in run.stderr
+    assert len(run.stderr.splitlines()) == 1
+    assert our_namespaces() == before
