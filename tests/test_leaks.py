@@ -1,0 +1,27 @@
+"""Twenty consecutive runs leave nothing behind (scripts/leak_check.py): no process, no Fast DDS
+shared memory, no growth in open files, resident memory within the script's stated bound."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "leak_check.py"
+DOMAIN_ID = str(20 + os.getpid() % 10)
+
+
+def test_twenty_runs_leave_nothing(tmp_path):
+    # A private /dev/shm: only files of these runs can be counted as left over.
+    private_shm = 'mount -t tmpfs tmpfs /dev/shm && exec "$@"'
+    result = subprocess.run(
+        ["unshare", "--mount", "sh", "-c", private_shm, "_", sys.executable, str(SCRIPT),
+         "--runs", "20", "--trials", "2", "--max-steps", "300"],
+        env={**os.environ, "ROS_DOMAIN_ID": DOMAIN_ID, "ROS_LOG_DIR": str(tmp_path / "log"),
+             "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"},
+        capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-3000:]
+    table = [line for line in result.stdout.splitlines() if " run " in line and ": exit " in line]
+    assert len(table) == 40 and all(": exit 0," in line for line in table), table
+    assert "leak_check: 20 process runs and 20 composed runs left nothing" in result.stdout
