@@ -221,10 +221,12 @@ def run_separate(values: dict, workdir: Path, env_command: list[str]) -> int:
 def stop_all(processes: dict) -> None:
     """Give every node the grace period to exit by itself, then terminate, then kill."""
     deadline = time.monotonic() + SHUTDOWN_GRACE_S
-    for process in processes.values():
+    for name, process in processes.items():
         try:
             process.wait(timeout=max(0.0, deadline - time.monotonic()))
         except subprocess.TimeoutExpired:
+            print(f"run_all: warning: node {name} did not exit within {SHUTDOWN_GRACE_S:g} s; "
+                  f"terminating it", file=sys.stderr, flush=True)
             process.terminate()
             try:
                 process.wait(timeout=2.0)

@@ -41,17 +41,20 @@ def test_killed_process_is_named_and_the_graph_comes_down(ros_env, tmp_path, nod
     except AssertionError:
         os.killpg(process.pid, signal.SIGINT)
         pytest.fail(f"the run did not reach trial 2: {process.communicate(timeout=30)[1][-3000:]}")
+    killed_at = time.time()
     os.kill(child(process, f"clnn_ros.nodes.{node}"), signal.SIGKILL)
-    killed_at = time.monotonic()
     _, stderr = process.communicate(timeout=40)
-    ended_after = time.monotonic() - killed_at
+    ended_after = time.time() - killed_at
     reason = ("the trial manager died (SIGKILL)" if node == "trial_manager" else
               f"node '{node}' died at tick ")
     assert process.returncode == 1, stderr
-    assert [line for line in error_lines(stderr)] == [
-        line for line in error_lines(stderr) if line.startswith("run_all: error: " + reason)]
-    assert len(error_lines(stderr)) == 1 and "Traceback" not in stderr, stderr
-    assert ended_after < 2 + 5, ended_after  # named within the lease, then the shutdown
+    lines = error_lines(stderr)
+    assert len(lines) == 1 and lines[0].startswith("run_all: error: " + reason), stderr[-3000:]
+    assert "Traceback" not in stderr
+    if node != "trial_manager":  # its ROS log line carries the wall time it named the node
+        named = next(line for line in stderr.splitlines() if "[trial_manager]" in line)
+        assert float(named.split("[")[2].rstrip("] ")) - killed_at < 2.0, named
+    assert ended_after < 10, ended_after  # named, the last messages delivered, all exited
     if node != "recorder":  # a killed recorder leaves its complete chunks (test_recording)
         messages = raw_messages(tmp_path / "run.mcap")
         assert assert_every_tick(messages) > 50

@@ -17,6 +17,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import time
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable, Iterator
@@ -77,6 +78,7 @@ LOCKSTEP_QOS = QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE,
 # history, so a slow recorder slows the graph down instead of losing messages.
 RECORDED = "/recorder/progress"
 RECORDER_WINDOW = 500
+ACK_WAIT_S = 3.0  # a node's last messages reach the recorder before the node exits (or this)
 PROGRESS_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                           history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE,
                           liveliness=LivelinessPolicy.AUTOMATIC,
@@ -159,9 +161,20 @@ class GraphNode(Node):
                                                 event_callbacks))
 
     def destroy_node(self) -> None:
+        self._deliver_published()
         for subscription in self._inputs:  # before the node's timers (their doorbells) go
             subscription.close()
         super().destroy_node()
+
+    def _deliver_published(self) -> None:
+        """Wait (ACK_WAIT_S at most in all) until every subscriber has acknowledged what the
+        graph's publishers sent: what a lagging subscriber (the recorder) has not received yet
+        is lost with the process otherwise."""
+        deadline = time.monotonic() + ACK_WAIT_S
+        for publisher, _ in self._expected:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0 or not publisher.wait_for_all_acked(Duration(seconds=remaining)):
+                return
 
     def inputs_visible(self) -> bool:
         """Does the ROS graph show the publisher (PUBLISHED_BY) of each input topic yet? Then
