@@ -40,7 +40,7 @@ from std_msgs.msg import String
 from clnn_ros_msgs.msg import TrialEvent
 
 from ..core.params import ParamError, Params, params_from_strings
-from .publisher_gid import SubscriptionWithGid
+from .publisher_gid import InputsWithGid
 from .validate import (action_problem, clock_problem, event_problem, reward_problem,
                        spikes_problem, state_problem, weights_problem)
 
@@ -56,6 +56,9 @@ READY = "/graph/ready"
 # The node whose messages each input topic carries; a node accepts them from no one else.
 PUBLISHED_BY = {CLOCK: "trial_manager", TRIAL_EVENT: "trial_manager", STATE: "environment",
                 SPIKES: "encoder", REWARD: "reward", ACTION: "agent", WEIGHTS: "agent"}
+# Before a topic's publisher is pinned, how long a message's sender may take to appear by name
+# in the ROS graph (discovery under load); afterwards an unknown sender is refused at once.
+NEW_PUBLISHER_WAIT_S = 2.0
 # What every subscriber of a topic refuses, whoever sent it (validate.py).
 CONTENT_RULES = {CLOCK: clock_problem, TRIAL_EVENT: event_problem, STATE: state_problem,
                  SPIKES: spikes_problem, REWARD: reward_problem, ACTION: action_problem,
@@ -121,7 +124,7 @@ class GraphNode(Node):
         self.extra_nodes = {n.strip() for n in self.settings["extra_nodes"].split(",") if n.strip()}
         self.refused = 0
         self._pinned = {}  # input topic: GIDs of the publishers its messages are accepted from
-        self._inputs = []  # SubscriptionWithGid of each input topic
+        self._inputs = InputsWithGid(self)  # the input topics' subscriptions
         self.finished = Future()
         self._expected = []
         for attribute, (msg_type, topic, subscribers) in publishers.items():
@@ -157,13 +160,11 @@ class GraphNode(Node):
                 callback(msg)
             else:
                 self.refuse(topic, msg, reason)
-        self._inputs.append(SubscriptionWithGid(self, msg_type, topic, receive, LOCKSTEP_QOS,
-                                                event_callbacks))
+        self._inputs.subscribe(msg_type, topic, receive, LOCKSTEP_QOS, event_callbacks)
 
     def destroy_node(self) -> None:
         self._deliver_published()
-        for subscription in self._inputs:  # before the node's timers (their doorbells) go
-            subscription.close()
+        self._inputs.close()  # before the node's timers (the doorbell) go
         super().destroy_node()
 
     def _deliver_published(self) -> None:
@@ -192,9 +193,15 @@ class GraphNode(Node):
         """Why a message from a publisher not pinned is refused; None after pinning it. The
         first publisher of the expected node name to send a message on the topic is pinned, no
         other after it (a publisher of that name that left without a word, like a killed run's
-        that the graph still lists for a while, is never pinned)."""
+        that the graph still lists for a while, is never pinned). Until then, a sender the ROS
+        graph does not name yet gets up to NEW_PUBLISHER_WAIT_S to appear (its node's name
+        travels apart from its first message)."""
         pinned, expected = self._pinned[topic], PUBLISHED_BY[topic]
         name = self._publishers_of(topic).get(publisher_gid)
+        deadline = time.monotonic() + NEW_PUBLISHER_WAIT_S
+        while name is None and not pinned and time.monotonic() < deadline:
+            time.sleep(0.01)  # DDS discovery updates the graph on its own threads
+            name = self._publishers_of(topic).get(publisher_gid)
         if name == expected and not pinned:
             pinned.add(publisher_gid)
             return None

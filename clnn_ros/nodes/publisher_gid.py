@@ -12,9 +12,12 @@ Waking the executor: when a message arrives, rmw calls the subscription's on-new
 callback on a DDS thread. That callback is rcl_timer_reset itself (C, lock-free, thread-safe,
 no Python) on a canceled zero-period timer of the node, the "doorbell": a reset timer is ready
 at once, so the executor (either kind) runs its callback, which cancels it and takes every
-message there is. rcl_timer_reset(timer) stands in for callback(user_data, count): the timer is
-the user data, the count is ignored (a function called with one argument more than it reads,
-fine in the x86-64 and AArch64 calling conventions).
+message of every input of the node. rcl_timer_reset(timer) stands in for callback(user_data,
+count): the timer is the user data, the count is ignored (a function called with one argument
+more than it reads, fine in the x86-64 and AArch64 calling conventions). Under a flood of
+messages (scripts/fuzz_graph.py) a ring is now and then lost: a message was seen waiting with
+the doorbell canceled, which stalled the graph. So a periodic sweep (SWEEP_S) also takes
+whatever is waiting; without a lost ring it finds nothing.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ from rclpy.type_support import check_is_valid_msg_type
 
 RMW_GID_STORAGE_SIZE = 16  # rmw/types.h of Jazzy
 RCL_RET_OK = 0
+SWEEP_S = 0.05  # the safety net's period: what a missed doorbell may cost, at most
 
 
 class _Allocator(ctypes.Structure):  # rcutils_allocator_t
@@ -73,13 +77,40 @@ _rcutils.rcutils_uint8_array_init.argtypes = [
 _rcutils.rcutils_uint8_array_init.restype = ctypes.c_int32
 
 
-class SubscriptionWithGid:
-    """A subscription whose callback gets the pair (message, publisher GID); the GID is
-    TopicEndpointInfo.endpoint_gid of Node.get_publishers_info_by_topic, as bytes. Call close()
-    before the node is destroyed (it stops the DDS thread's wake-ups)."""
+class InputsWithGid:
+    """The subscriptions of one node whose callbacks get the pair (message, publisher GID); the
+    GID is TopicEndpointInfo.endpoint_gid of Node.get_publishers_info_by_topic, as bytes. Call
+    close() before the node is destroyed (it stops the DDS threads' wake-ups)."""
+
+    def __init__(self, node: Node):
+        self.node = node
+        self.subscriptions = []
+        self.doorbell = node.create_timer(0.0, self.take_all)
+        self.doorbell.cancel()
+        self.sweep = node.create_timer(SWEEP_S, self.take_all)
+
+    def subscribe(self, msg_type, topic: str, callback: Callable, qos: QoSProfile,
+                  event_callbacks: SubscriptionEventCallbacks | None = None) -> None:
+        self.subscriptions.append(_Subscription(self.node, msg_type, topic, callback, qos,
+                                                event_callbacks, self.doorbell))
+
+    def take_all(self) -> None:
+        self.doorbell.cancel()  # first: a message arriving from now on rings again
+        for subscription in self.subscriptions:
+            subscription.take_all()
+
+    def close(self) -> None:
+        for subscription in self.subscriptions:
+            subscription.close()
+        self.node.destroy_timer(self.sweep)
+        self.node.destroy_timer(self.doorbell)
+
+
+class _Subscription:
+    """One rcl subscription, not handed to the executor: messages arriving ring the doorbell."""
 
     def __init__(self, node: Node, msg_type, topic: str, callback: Callable, qos: QoSProfile,
-                 event_callbacks: SubscriptionEventCallbacks | None = None):
+                 event_callbacks: SubscriptionEventCallbacks | None, doorbell):
         check_is_valid_msg_type(msg_type)  # loads the type support the handle needs
         with node.handle:
             self.handle = _rclpy.Subscription(node.handle, msg_type, topic,
@@ -97,17 +128,14 @@ class SubscriptionWithGid:
             .create_event_handlers(node.default_callback_group, self.handle, topic)
         for handler in self.event_handlers:
             node.add_waitable(handler)
-        self.doorbell = node.create_timer(0.0, self._take_all)
-        self.doorbell.cancel()
-        self._set_on_new_message(_RING, self.doorbell.handle.pointer)
+        self._set_on_new_message(_RING, doorbell.handle.pointer)
 
     def _set_on_new_message(self, callback, user_data) -> None:
         if _rcl.rcl_subscription_set_on_new_message_callback(
                 self.handle.pointer, callback, user_data) != RCL_RET_OK:
             raise RuntimeError(f"cannot set the on-new-message callback of {self.handle}")
 
-    def _take_all(self) -> None:
-        self.doorbell.cancel()  # first: a message arriving from now on rings again
+    def take_all(self) -> None:
         while _rcl.rcl_take_serialized_message(self.handle.pointer, ctypes.byref(self._buffer),
                                                ctypes.byref(self._info), None) == RCL_RET_OK:
             data = ctypes.string_at(self._buffer.buffer, self._buffer.buffer_length)
@@ -119,5 +147,4 @@ class SubscriptionWithGid:
         for handler in self.event_handlers:
             self.node.remove_waitable(handler)
             handler.destroy()
-        self.node.destroy_timer(self.doorbell)
         self.handle.destroy_when_not_in_use()

@@ -21,6 +21,8 @@ LIMIT_TOLERANCE = 1e-6
 
 
 def clock_problem(msg, p: Params) -> str | None:
+    if msg.clock.nanosec >= 1_000_000_000:
+        return f"nanosec {msg.clock.nanosec} is not below one second"
     nanoseconds = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
     if nanoseconds % round(p.tau * 1e9):
         return f"sim time {msg.clock.sec}.{msg.clock.nanosec:09d} s is not a whole tick"
