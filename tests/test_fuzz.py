@@ -1,8 +1,8 @@
 """The graph under fuzz (scripts/fuzz_graph.py): 1,000 malformed or hostile messages on each of
-the seven input topics while an episode runs in real processes. Every subscriber refuses every
-one of them, each with a logged reason of the expected kind (its content, or a sender that is
-not the topic's publisher), no real message is refused, and the episode equals the core's bit
-for bit."""
+the seven input topics while an episode runs (5 processes, and composed). Every subscriber
+refuses every one of them, each with a logged reason of the expected kind (its content, or a
+sender that is not the topic's publisher), no real message is refused, and the episode equals
+the core's bit for bit."""
 
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ from collections import Counter
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
@@ -37,7 +38,8 @@ def refusals(stderr: str) -> Counter:
     return counts
 
 
-def test_every_fuzz_message_is_refused_and_the_episode_equals_the_core(tmp_path):
+@pytest.mark.parametrize("composed", [False, True], ids=["processes", "composed"])
+def test_every_fuzz_message_is_refused_and_the_episode_equals_the_core(tmp_path, composed):
     env = {**os.environ, "ROS_DOMAIN_ID": DOMAIN_ID, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
            "ROS_LOG_DIR": str(tmp_path / "ros_log")}
     seed, trials, max_steps, per_topic = 2, 16, 1500, 1000
@@ -53,8 +55,8 @@ def test_every_fuzz_message_is_refused_and_the_episode_equals_the_core(tmp_path)
             graph = subprocess.run(
                 [sys.executable, "-m", "clnn_ros.run_all", "--quiet", "--no-record", "--seed",
                  str(seed), "--trials", str(trials), "--max-steps", str(max_steps), "--out",
-                 str(tmp_path)], env=env, stdout=subprocess.PIPE, stderr=stderr, text=True,
-                timeout=240)
+                 str(tmp_path), *(["--composed"] if composed else [])], env=env,
+                stdout=subprocess.PIPE, stderr=stderr, text=True, timeout=240)
         _, fuzz_errors = fuzzer.communicate(timeout=60)
     finally:
         fuzzer.kill()

@@ -75,6 +75,8 @@ _rcutils.rcutils_get_default_allocator.restype = _Allocator
 _rcutils.rcutils_uint8_array_init.argtypes = [
     ctypes.POINTER(_SerializedMessage), ctypes.c_size_t, ctypes.POINTER(_Allocator)]
 _rcutils.rcutils_uint8_array_init.restype = ctypes.c_int32
+_rcutils.rcutils_uint8_array_fini.argtypes = [ctypes.POINTER(_SerializedMessage)]
+_rcutils.rcutils_uint8_array_fini.restype = ctypes.c_int32
 
 
 class InputsWithGid:
@@ -148,3 +150,4 @@ class _Subscription:
             self.node.remove_waitable(handler)
             handler.destroy()
         self.handle.destroy_when_not_in_use()
+        _rcutils.rcutils_uint8_array_fini(ctypes.byref(self._buffer))
