@@ -5,11 +5,11 @@ topic of the graph while an episode runs, and reports what it sent.
                                  [--max-steps 10000] [--report fuzz.json]
 
 Start it beside `python -m clnn_ros.run_all ...` on the same ROS_DOMAIN_ID, with the run's
---nsv and --max-steps (it builds messages for that network); start it first, it waits for the
-graph. Once its publishers have matched the graph's subscribers, on each real
-/clock(t) (one it did not send itself), sends --per-tick messages on each input topic, aimed
-at the live tick t, until each topic has had --per-topic messages. Every message is of one
-category:
+--nsv and --max-steps (it builds messages for that network). Start it first: it waits for the
+graph (a participant that joins a running graph is discovered late). Once its publishers have
+matched the graph's subscribers, it sends, on each real /clock(t) (one it did not send itself),
+--per-tick messages on each input topic aimed at the live tick t, until each topic has had
+--per-topic messages. Every message is of one category:
 
   malformed (refused by every subscriber for its content, docs/ROS_GRAPH.md): per topic, e.g.
     non-finite or out-of-range or inconsistent states, wrong-sized spike vectors or weights,
@@ -23,7 +23,9 @@ Categories are drawn evenly per topic and shuffled with --seed (the counts are d
 the ticks follow the live graph). Exit 0 with the report (JSON, to --report or stdout): per
 topic the messages sent per category and the refusals to expect from each of its subscribers
 ("content" or "publisher"), and the subscribers. Exit 1 with one line if the graph does not
-start, or the episode ends before everything was sent.
+start, the episode ends before everything was sent, or a message was not delivered. Each
+message is judged as the nodes will see it (after a serialization round trip) and must fall in
+its category, or the fuzzer stops (a fuzzer bug).
 """
 
 from __future__ import annotations
@@ -242,7 +244,7 @@ class Fuzzer(Node):
         self.sent = {topic: Counter() for topic in TYPES}
         self.refusals = {topic: Counter() for topic in TYPES}
         self.fuzz_publishers = {topic: self.create_publisher(TYPES[topic], topic, LOCKSTEP_QOS)
-                           for topic in TYPES}
+                                for topic in TYPES}
         self.episode_ended = False
         self.graph_started = False
         self.own_gids = {}  # topic: GIDs of this fuzzer's publishers of /clock, /trial/event
@@ -256,8 +258,8 @@ class Fuzzer(Node):
                    for topic, nodes in SUBSCRIBERS.items())
 
     def from_graph(self, topic: str, publisher_gid: bytes) -> bool:
-        """Did someone else than this fuzzer send it, i.e. the graph? (The ROS graph may name a
-        remote publisher's node only seconds after its first message; ours it knows at once.)"""
+        """Did anyone but this fuzzer, i.e. the graph, send it? (The ROS graph may name a remote
+        publisher's node only seconds after its first message; ours it knows at once.)"""
         if topic not in self.own_gids:
             self.own_gids[topic] = {bytes(info.endpoint_gid)
                                     for info in self.get_publishers_info_by_topic(topic)
