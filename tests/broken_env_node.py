@@ -28,10 +28,12 @@ class BrokenEnvironmentNode(EnvironmentNode):
             return
         super().on_trial_event(event)
 
-    def on_action(self, action: Action) -> None:
-        if "accept_bad_force" in BUGS and action.force_direction == 5:
-            action.force_direction = 1
-        super().on_action(action)
+    def refuse(self, topic: str, msg, reason: str) -> None:
+        if "accept_bad_force" in BUGS and isinstance(msg, Action) and msg.force_direction == 5:
+            msg.force_direction = 1  # ignores the content rules' verdict
+            super().on_action(msg)
+            return
+        super().refuse(topic, msg, reason)
 
     @property
     def successful_steps(self) -> int:

@@ -35,7 +35,7 @@ from rclpy.duration import Duration
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile,
                        ReliabilityPolicy)
 from rclpy.task import Future
-from std_msgs.msg import String
+from std_msgs.msg import Empty, String
 
 from clnn_ros_msgs.msg import TrialEvent
 
@@ -68,14 +68,18 @@ CONTENT_RULES = {CLOCK: clock_problem, TRIAL_EVENT: event_problem, STATE: state_
 # most END, EPISODE_END and START on /trial/event within one tick). A subscriber outside the
 # lockstep (echo, the recorder) may lag: the publisher's history keeps the last 2000 messages
 # for it (about 1 s of the graph); the recorder also holds the graph back (RECORDER_WINDOW).
-# Liveliness: DDS asserts each publisher alive on its own; a process killed outright is
-# declared not alive to its subscribers within the lease, which is how the trial manager tells
-# a dead node (docs/ROS_GRAPH.md) from a slow one.
-LIVELINESS_LEASE = Duration(seconds=1.0)
 LOCKSTEP_QOS = QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE,
-                          history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE,
-                          liveliness=LivelinessPolicy.AUTOMATIC,
-                          liveliness_lease_duration=LIVELINESS_LEASE)
+                          history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
+# Liveliness: each node (and the recorder) has a publisher on ALIVE + its name that never sends
+# a message; DDS asserts it alive on its own, so when the process dies outright its subscriber,
+# the trial manager, is told within the lease (docs/ROS_GRAPH.md). A topic of its own keeps the
+# data topics' QoS plain: a subscriber asking for a lease refuses publishers that offer none,
+# such as a swapped-in environment node's (docs/ENV_CONTRACT.md).
+ALIVE = "/graph/alive/"
+ALIVE_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                       history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE,
+                       liveliness=LivelinessPolicy.AUTOMATIC,
+                       liveliness_lease_duration=Duration(seconds=1.0))
 # The recorder's progress (the last tick it holds on every per-tick topic): the trial manager
 # keeps the graph at most RECORDER_WINDOW ticks ahead of it, far less than the publishers'
 # history, so a slow recorder slows the graph down instead of losing messages.
@@ -83,9 +87,7 @@ RECORDED = "/recorder/progress"
 RECORDER_WINDOW = 500
 ACK_WAIT_S = 3.0  # a node's last messages reach the recorder before the node exits (or this)
 PROGRESS_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                          history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE,
-                          liveliness=LivelinessPolicy.AUTOMATIC,
-                          liveliness_lease_duration=LIVELINESS_LEASE)
+                          history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
 # A readiness announcement must reach a trial manager that starts later than the node; the
 # depth keeps every node's announcement when several arrive at once.
 READY_QOS = QoSProfile(depth=16, reliability=ReliabilityPolicy.RELIABLE,
@@ -132,6 +134,7 @@ class GraphNode(Node):
             setattr(self, attribute, publisher)
             self._expected.append((publisher, subscribers + len(self.extra_nodes)))
         self._ready_publisher = self.create_publisher(String, READY, READY_QOS)
+        self._alive = Alive(self, name)
         self._ready_timer = self.create_timer(0.02, self._announce_when_matched)
         if self.listens_to_trial_events:
             self.subscribe(TrialEvent, TRIAL_EVENT, self.on_trial_event)
@@ -145,7 +148,7 @@ class GraphNode(Node):
             self._ready_publisher.publish(String(data=self.get_name()))
             self._ready_timer.cancel()
 
-    def subscribe(self, msg_type, topic: str, callback: Callable, event_callbacks=None) -> None:
+    def subscribe(self, msg_type, topic: str, callback: Callable) -> None:
         """Subscribe to an input of the graph. A message goes to `callback` only if it keeps the
         topic's content rules (CONTENT_RULES) and comes from the publisher the graph gives the
         topic (PUBLISHED_BY); otherwise it is refused, for the first reason found."""
@@ -160,7 +163,7 @@ class GraphNode(Node):
                 callback(msg)
             else:
                 self.refuse(topic, msg, reason)
-        self._inputs.subscribe(msg_type, topic, receive, LOCKSTEP_QOS, event_callbacks)
+        self._inputs.subscribe(msg_type, topic, receive, LOCKSTEP_QOS)
 
     def destroy_node(self) -> None:
         self._deliver_published()
@@ -229,6 +232,23 @@ class GraphNode(Node):
     def finish(self, exit_code: int) -> None:
         if not self.finished.done():
             self.finished.set_result(exit_code)
+
+
+class Alive:
+    """A node's publisher on ALIVE + its name. It sends a message (which asserts liveliness at
+    once) each time a new subscriber matches it: DDS alone may take long to tell a new
+    subscriber that a publisher that never writes is alive."""
+
+    def __init__(self, node: Node, name: str):
+        self.publisher = node.create_publisher(Empty, ALIVE + name, ALIVE_QOS)
+        self.subscribers = 0
+        self.timer = node.create_timer(0.1, self.greet_new_subscribers)
+
+    def greet_new_subscribers(self) -> None:
+        count = self.publisher.get_subscription_count()
+        if count > self.subscribers:
+            self.publisher.publish(Empty())
+        self.subscribers = count
 
 
 def read_parameters(node: Node) -> tuple[Params, dict]:

@@ -25,7 +25,6 @@ from __future__ import annotations
 import ctypes
 from typing import Callable
 
-from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
@@ -91,10 +90,9 @@ class InputsWithGid:
         self.doorbell.cancel()
         self.sweep = node.create_timer(SWEEP_S, self.take_all)
 
-    def subscribe(self, msg_type, topic: str, callback: Callable, qos: QoSProfile,
-                  event_callbacks: SubscriptionEventCallbacks | None = None) -> None:
+    def subscribe(self, msg_type, topic: str, callback: Callable, qos: QoSProfile) -> None:
         self.subscriptions.append(_Subscription(self.node, msg_type, topic, callback, qos,
-                                                event_callbacks, self.doorbell))
+                                                self.doorbell))
 
     def take_all(self) -> None:
         self.doorbell.cancel()  # first: a message arriving from now on rings again
@@ -112,7 +110,7 @@ class _Subscription:
     """One rcl subscription, not handed to the executor: messages arriving ring the doorbell."""
 
     def __init__(self, node: Node, msg_type, topic: str, callback: Callable, qos: QoSProfile,
-                 event_callbacks: SubscriptionEventCallbacks | None, doorbell):
+                 doorbell):
         check_is_valid_msg_type(msg_type)  # loads the type support the handle needs
         with node.handle:
             self.handle = _rclpy.Subscription(node.handle, msg_type, topic,
@@ -125,11 +123,6 @@ class _Subscription:
                                              ctypes.byref(allocator)) != RCL_RET_OK:
             raise MemoryError("cannot allocate a serialized-message buffer")
         self._info = _MessageInfo()
-        # QoS events (liveliness, ...), as Node.create_subscription sets them up.
-        self.event_handlers = (event_callbacks or SubscriptionEventCallbacks()) \
-            .create_event_handlers(node.default_callback_group, self.handle, topic)
-        for handler in self.event_handlers:
-            node.add_waitable(handler)
         self._set_on_new_message(_RING, doorbell.handle.pointer)
 
     def _set_on_new_message(self, callback, user_data) -> None:
@@ -146,8 +139,5 @@ class _Subscription:
 
     def close(self) -> None:
         self._set_on_new_message(None, None)
-        for handler in self.event_handlers:
-            self.node.remove_waitable(handler)
-            handler.destroy()
         self.handle.destroy_when_not_in_use()
         _rcutils.rcutils_uint8_array_fini(ctypes.byref(self._buffer))

@@ -35,8 +35,8 @@ from std_msgs.msg import String, UInt64
 from clnn_ros_msgs.msg import TrialEvent
 
 from .. import bag
-from .common import (PROGRESS_QOS, READY, READY_QOS, RECORDED, TRIAL_EVENT, make_executor,
-                     ros_session, spin_until_finished)
+from .common import (PROGRESS_QOS, READY, READY_QOS, RECORDED, TRIAL_EVENT,
+                     Alive, make_executor, ros_session, spin_until_finished)
 
 NAME = "recorder"
 PER_TICK = ("/clock", "/cartpole/state", "/rln/spikes", "/rln/reward", "/rln/action")
@@ -85,6 +85,7 @@ class RecorderNode(Node):
         self.last_message_at = time.monotonic()
         self._ready_publisher = self.create_publisher(String, READY, READY_QOS)
         self._progress_publisher = self.create_publisher(UInt64, RECORDED, PROGRESS_QOS)
+        self._alive = Alive(self, NAME)
         self._progress = UInt64()
         self._timer = self.create_timer(0.02, self._poll)
         self.closed = False

@@ -7,9 +7,9 @@ trials, ends the episode, reports progress, and detects a stalled graph.
 Tick t is done when it holds the environment's state(t) and the agent's action(t); then it
 publishes /clock(t+1), preceded by END/START (or EPISODE_END) events when the trial is over.
 When no tick completes for `stall_timeout_s`, it names the first node of the tick's chain whose
-message is missing, ends the episode and exits with status 1. A node whose process dies (its
-publishers lose DDS liveliness, within about a second) or leaves the graph ends the episode the
-same way, named at once. With a recorder it keeps the clock at most RECORDER_WINDOW ticks ahead
+message is missing, ends the episode and exits with status 1. A node whose process dies (it
+loses DDS liveliness within a second) or that leaves the graph ends the episode the same way,
+named at once. With a recorder it keeps the clock at most RECORDER_WINDOW ticks ahead
 of the recorder's progress, so that no message is lost to a slow recorder.
 """
 
@@ -24,14 +24,15 @@ import numpy as np
 from clnn_ros_msgs.msg import Action, CartPoleState, Reward, SpikeVector, TrialEvent, WeightSnapshot
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rosgraph_msgs.msg import Clock
-from std_msgs.msg import String, UInt64
+from std_msgs.msg import Empty, String, UInt64
 
 from ..core.episode import seed_setup, start_from_setting
-from .common import (ACTION, CLOCK, GRAPH_NODES, PROGRESS_QOS, READY, READY_QOS, RECORDED,
-                     RECORDER_WINDOW, REWARD, SPIKES, STATE, TRIAL_EVENT, WEIGHTS, GraphNode,
-                     TickJoin, node_main)
+from .common import (ACTION, ALIVE, ALIVE_QOS, CLOCK, GRAPH_NODES, PROGRESS_QOS, READY,
+                     READY_QOS, RECORDED, RECORDER_WINDOW, REWARD, SPIKES, STATE, TRIAL_EVENT,
+                     WEIGHTS, GraphNode, TickJoin, node_main)
 
 STARTUP_TIMEOUT_S = 60.0  # process start, imports and discovery of the whole graph
+CONFIRM_S = 0.3  # a node that lost liveliness is dead once the graph stops for this long
 # Who publishes what within a tick, in causal order: the first one missing went silent.
 CHAIN = ((STATE, "environment"), (SPIKES, "encoder"), (REWARD, "reward"), (ACTION, "agent"))
 
@@ -58,17 +59,22 @@ class TrialManagerNode(GraphNode):
         self.last_progress = time.monotonic()
         self.exit_reason = ""
         self.join = TickJoin(self, (STATE, ACTION), self.on_tick)
-        self.subscribe(CartPoleState, STATE, self.seen(STATE), self.watch("environment"))
-        self.subscribe(SpikeVector, SPIKES, self.seen(SPIKES), self.watch("encoder"))
-        self.subscribe(Reward, REWARD, self.seen(REWARD), self.watch("reward"))
-        self.subscribe(Action, ACTION, self.seen(ACTION), self.watch("agent"))
+        self.subscribe(CartPoleState, STATE, self.seen(STATE))
+        self.subscribe(SpikeVector, SPIKES, self.seen(SPIKES))
+        self.subscribe(Reward, REWARD, self.seen(REWARD))
+        self.subscribe(Action, ACTION, self.seen(ACTION))
         self.subscribe(WeightSnapshot, WEIGHTS, self.on_weights)
         self.create_subscription(String, READY, self.on_ready, READY_QOS)
         self.recorded_tick = -1
         self.held = None  # (tick, starts a trial): the next tick, waiting for the recorder
         if "recorder" in self.extra_nodes:
-            self.create_subscription(UInt64, RECORDED, self.on_recorded, PROGRESS_QOS,
-                                     event_callbacks=self.watch("recorder"))
+            self.create_subscription(UInt64, RECORDED, self.on_recorded, PROGRESS_QOS)
+        self.suspects = {}  # node: (what happened, when); see watch()
+        self.alive = set()
+        self.watched = (*GRAPH_NODES, *sorted(self.extra_nodes))
+        for node in self.watched:
+            self.create_subscription(Empty, ALIVE + node, lambda _: None, ALIVE_QOS,
+                                     event_callbacks=self.watch(node))
         self.watchdog = self.create_timer(0.1, self.check)
 
     def seen(self, topic: str):
@@ -82,17 +88,26 @@ class TrialManagerNode(GraphNode):
         self.ready.add(msg.data)
 
     def watch(self, node: str) -> SubscriptionEventCallbacks:
-        """Liveliness of a topic's publisher: lost (the process died) or gone (it left the graph)
-        during the episode ends it, naming the node."""
+        """The node's liveliness (ALIVE): lost (its process died) or gone (it left the graph)
+        makes it a suspect; check() ends the episode, naming it, once the graph has made no
+        progress for CONFIRM_S since (on a machine too loaded to assert liveliness in time,
+        the graph still ticks). Regained liveliness clears it."""
         def changed(info) -> None:
-            if self.started_at is None or self.finished.done():
-                return
-            if info.not_alive_count_change > 0:
-                self.stop(1, f"node '{node}' died at tick {self.join.tick} (its publishers lost "
-                             f"liveliness)")
+            if info.alive_count_change > 0:
+                self.suspects.pop(node, None)
+                self.alive.add(node)
+            elif info.not_alive_count_change > 0:
+                self.suspects[node] = ("died", time.monotonic())
             elif info.alive_count_change < 0 and info.alive_count == 0:
-                self.stop(1, f"node '{node}' left the graph at tick {self.join.tick}")
+                self.suspects[node] = ("left the graph", time.monotonic())
         return SubscriptionEventCallbacks(liveliness=changed)
+
+    def watching_all(self) -> bool:
+        """Has each node with an ALIVE publisher (every node of this package; a swapped-in
+        environment node may have none, and is then caught by the stall watchdog alone) been
+        seen alive, so that its death can be told from tick 0 on?"""
+        return all(node in self.alive for node in self.watched
+                   if self.count_publishers(ALIVE + node))
 
     def on_recorded(self, msg: UInt64) -> None:
         if msg.data > self.recorded_tick and self.held is not None:
@@ -118,7 +133,8 @@ class TrialManagerNode(GraphNode):
         """Start once every node is ready; afterwards watch for a stall."""
         now = time.monotonic()
         if self.started_at is None:
-            if self.publishers_matched() and self.ready >= set(GRAPH_NODES) | self.extra_nodes:
+            if self.publishers_matched() and self.ready >= set(GRAPH_NODES) | self.extra_nodes \
+                    and self.watching_all():
                 self.started_at = self.last_progress = now
                 self.advance(0, starts_trial=True)
             elif now - self.last_progress > STARTUP_TIMEOUT_S:
@@ -126,6 +142,10 @@ class TrialManagerNode(GraphNode):
                     "(subscriptions of /clock or /trial/event)"]
                 self.stop(1, f"graph not ready after {STARTUP_TIMEOUT_S:.0f} s: "
                              f"waiting for {', '.join(missing)}")
+        elif confirmed := [(node, what) for node, (what, since) in self.suspects.items()
+                           if now - max(since, self.last_progress) >= CONFIRM_S]:
+            node, what = confirmed[0]
+            self.stop(1, f"node '{node}' {what} at tick {self.join.tick}")
         elif now - self.last_progress > self.settings["stall_timeout_s"]:
             silent = "recorder" if self.held is not None else next(
                 (node for topic, node in CHAIN if self.last_tick[topic] < self.join.tick),
