@@ -1,10 +1,21 @@
 """Session-wide test fixtures."""
 
+import subprocess
 from pathlib import Path
 
 import pytest
 
 from clnn_ros.rosenv import SHM, fast_dds_shm_files, shm_files_in_use
+
+
+@pytest.fixture(scope="session")
+def in_private_shm() -> list[str]:
+    """A command prefix that runs a command with a /dev/shm of its own (only its files are
+    there), or [] where mount namespaces are not allowed: then the shared /dev/shm is used and
+    a file left over is one that is new and unused (remove_shared_memory_of_killed_nodes)."""
+    prefix = ["unshare", "--mount", "sh", "-c", 'mount -t tmpfs tmpfs /dev/shm && exec "$@"', "_"]
+    allowed = subprocess.run([*prefix, "true"], capture_output=True).returncode == 0
+    return prefix if allowed else []
 
 
 @pytest.fixture(scope="session", autouse=True)
@@ -14,5 +25,10 @@ def remove_shared_memory_of_killed_nodes():
     process uses any more (what Fast DDS's `fastdds shm clean` does)."""
     before = fast_dds_shm_files()
     yield
-    for name in (fast_dds_shm_files() - before) - shm_files_in_use():
+    remove_unused_fast_dds_files(fast_dds_shm_files() - before)
+
+
+def remove_unused_fast_dds_files(names: set[str] | None = None) -> None:
+    """Remove the Fast DDS files (all, or `names`) that no process uses: `fastdds shm clean`."""
+    for name in (fast_dds_shm_files() if names is None else names) - shm_files_in_use():
         (Path(SHM) / name).unlink(missing_ok=True)

@@ -32,8 +32,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 from rclpy.duration import Duration
-from rclpy.qos import (DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile,
-                       ReliabilityPolicy)
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from std_msgs.msg import Empty, String
 
@@ -70,16 +69,15 @@ CONTENT_RULES = {CLOCK: clock_problem, TRIAL_EVENT: event_problem, STATE: state_
 # for it (about 1 s of the graph); the recorder also holds the graph back (RECORDER_WINDOW).
 LOCKSTEP_QOS = QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE,
                           history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
-# Liveliness: each node (and the recorder) has a publisher on ALIVE + its name that never sends
-# a message; DDS asserts it alive on its own, so when the process dies outright its subscriber,
-# the trial manager, is told within the lease (docs/ROS_GRAPH.md). A topic of its own keeps the
-# data topics' QoS plain: a subscriber asking for a lease refuses publishers that offer none,
-# such as a swapped-in environment node's (docs/ENV_CONTRACT.md).
+# Heartbeats: each node (and the recorder) publishes on ALIVE + its name every HEARTBEAT_S, from
+# its executor, so the trial manager tells a dead process (no heartbeat for ALIVE_TIMEOUT_S) from
+# a slow one (docs/ROS_GRAPH.md). Not DDS liveliness: a finite lease starts Fast DDS 2.14's
+# liveliness protocol, which deadlocked a trial manager here when a participant was killed.
 ALIVE = "/graph/alive/"
 ALIVE_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                       history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE,
-                       liveliness=LivelinessPolicy.AUTOMATIC,
-                       liveliness_lease_duration=Duration(seconds=1.0))
+                       history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
+HEARTBEAT_S = 0.1
+ALIVE_TIMEOUT_S = 1.0
 # The recorder's progress (the last tick it holds on every per-tick topic): the trial manager
 # keeps the graph at most RECORDER_WINDOW ticks ahead of it, far less than the publishers'
 # history, so a slow recorder slows the graph down instead of losing messages.
@@ -235,20 +233,15 @@ class GraphNode(Node):
 
 
 class Alive:
-    """A node's publisher on ALIVE + its name. It sends a message (which asserts liveliness at
-    once) each time a new subscriber matches it: DDS alone may take long to tell a new
-    subscriber that a publisher that never writes is alive."""
+    """A node's heartbeat: an empty message on ALIVE + its name every HEARTBEAT_S."""
 
     def __init__(self, node: Node, name: str):
         self.publisher = node.create_publisher(Empty, ALIVE + name, ALIVE_QOS)
-        self.subscribers = 0
-        self.timer = node.create_timer(0.1, self.greet_new_subscribers)
+        self.message = Empty()
+        self.timer = node.create_timer(HEARTBEAT_S, self.beat)
 
-    def greet_new_subscribers(self) -> None:
-        count = self.publisher.get_subscription_count()
-        if count > self.subscribers:
-            self.publisher.publish(Empty())
-        self.subscribers = count
+    def beat(self) -> None:
+        self.publisher.publish(self.message)
 
 
 def read_parameters(node: Node) -> tuple[Params, dict]:

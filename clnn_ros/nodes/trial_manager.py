@@ -7,9 +7,9 @@ trials, ends the episode, reports progress, and detects a stalled graph.
 Tick t is done when it holds the environment's state(t) and the agent's action(t); then it
 publishes /clock(t+1), preceded by END/START (or EPISODE_END) events when the trial is over.
 When no tick completes for `stall_timeout_s`, it names the first node of the tick's chain whose
-message is missing, ends the episode and exits with status 1. A node whose process dies (it
-loses DDS liveliness within a second) or that leaves the graph ends the episode the same way,
-named at once. With a recorder it keeps the clock at most RECORDER_WINDOW ticks ahead
+message is missing, ends the episode and exits with status 1. A node whose process dies (its
+heartbeats stop for a second while the graph stands still) ends the episode the same way, named
+at once. With a recorder it keeps the clock at most RECORDER_WINDOW ticks ahead
 of the recorder's progress, so that no message is lost to a slow recorder.
 """
 
@@ -22,17 +22,16 @@ from pathlib import Path
 
 import numpy as np
 from clnn_ros_msgs.msg import Action, CartPoleState, Reward, SpikeVector, TrialEvent, WeightSnapshot
-from rclpy.event_handler import SubscriptionEventCallbacks
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Empty, String, UInt64
 
 from ..core.episode import seed_setup, start_from_setting
-from .common import (ACTION, ALIVE, ALIVE_QOS, CLOCK, GRAPH_NODES, PROGRESS_QOS, READY,
+from .common import (ACTION, ALIVE, ALIVE_QOS, ALIVE_TIMEOUT_S, CLOCK, GRAPH_NODES, PROGRESS_QOS, READY,
                      READY_QOS, RECORDED, RECORDER_WINDOW, REWARD, SPIKES, STATE, TRIAL_EVENT,
                      WEIGHTS, GraphNode, TickJoin, node_main)
 
 STARTUP_TIMEOUT_S = 60.0  # process start, imports and discovery of the whole graph
-CONFIRM_S = 0.3  # a node that lost liveliness is dead once the graph stops for this long
+CONFIRM_S = 0.3  # a node without heartbeats is dead once the graph has stopped for this long
 # Who publishes what within a tick, in causal order: the first one missing went silent.
 CHAIN = ((STATE, "environment"), (SPIKES, "encoder"), (REWARD, "reward"), (ACTION, "agent"))
 
@@ -69,12 +68,10 @@ class TrialManagerNode(GraphNode):
         self.held = None  # (tick, starts a trial): the next tick, waiting for the recorder
         if "recorder" in self.extra_nodes:
             self.create_subscription(UInt64, RECORDED, self.on_recorded, PROGRESS_QOS)
-        self.suspects = {}  # node: (what happened, when); see watch()
-        self.alive = set()
+        self.heard = {}  # node: when its last heartbeat came
         self.watched = (*GRAPH_NODES, *sorted(self.extra_nodes))
         for node in self.watched:
-            self.create_subscription(Empty, ALIVE + node, lambda _: None, ALIVE_QOS,
-                                     event_callbacks=self.watch(node))
+            self.create_subscription(Empty, ALIVE + node, self.heartbeat_of(node), ALIVE_QOS)
         self.watchdog = self.create_timer(0.1, self.check)
 
     def seen(self, topic: str):
@@ -87,27 +84,25 @@ class TrialManagerNode(GraphNode):
     def on_ready(self, msg: String) -> None:
         self.ready.add(msg.data)
 
-    def watch(self, node: str) -> SubscriptionEventCallbacks:
-        """The node's liveliness (ALIVE): lost (its process died) or gone (it left the graph)
-        makes it a suspect; check() ends the episode, naming it, once the graph has made no
-        progress for CONFIRM_S since (on a machine too loaded to assert liveliness in time,
-        the graph still ticks). Regained liveliness clears it."""
-        def changed(info) -> None:
-            if info.alive_count_change > 0:
-                self.suspects.pop(node, None)
-                self.alive.add(node)
-            elif info.not_alive_count_change > 0:
-                self.suspects[node] = ("died", time.monotonic())
-            elif info.alive_count_change < 0 and info.alive_count == 0:
-                self.suspects[node] = ("left the graph", time.monotonic())
-        return SubscriptionEventCallbacks(liveliness=changed)
+    def heartbeat_of(self, node: str):
+        def heard(_) -> None:
+            self.heard[node] = time.monotonic()
+        return heard
 
     def watching_all(self) -> bool:
-        """Has each node with an ALIVE publisher (every node of this package; a swapped-in
+        """Has each node with a heartbeat publisher (every node of this package; a swapped-in
         environment node may have none, and is then caught by the stall watchdog alone) been
-        seen alive, so that its death can be told from tick 0 on?"""
-        return all(node in self.alive for node in self.watched
+        heard, so that its death can be told from tick 0 on?"""
+        return all(node in self.heard for node in self.watched
                    if self.count_publishers(ALIVE + node))
+
+    def dead_node(self, now: float) -> str | None:
+        """A node whose heartbeats stopped ALIVE_TIMEOUT_S ago while the graph made no progress
+        for CONFIRM_S (on a machine too loaded to beat in time, the graph still ticks)."""
+        if now - self.last_progress < CONFIRM_S:
+            return None
+        return next((node for node, heard in self.heard.items()
+                     if now - heard > ALIVE_TIMEOUT_S), None)
 
     def on_recorded(self, msg: UInt64) -> None:
         if msg.data > self.recorded_tick and self.held is not None:
@@ -142,10 +137,9 @@ class TrialManagerNode(GraphNode):
                     "(subscriptions of /clock or /trial/event)"]
                 self.stop(1, f"graph not ready after {STARTUP_TIMEOUT_S:.0f} s: "
                              f"waiting for {', '.join(missing)}")
-        elif confirmed := [(node, what) for node, (what, since) in self.suspects.items()
-                           if now - max(since, self.last_progress) >= CONFIRM_S]:
-            node, what = confirmed[0]
-            self.stop(1, f"node '{node}' {what} at tick {self.join.tick}")
+        elif dead := self.dead_node(now):
+            self.stop(1, f"node '{dead}' died at tick {self.join.tick} (no heartbeat for "
+                         f"{ALIVE_TIMEOUT_S:g} s)")
         elif now - self.last_progress > self.settings["stall_timeout_s"]:
             silent = "recorder" if self.held is not None else next(
                 (node for topic, node in CHAIN if self.last_tick[topic] < self.join.tick),
