@@ -30,3 +30,16 @@ def shm_files_in_use() -> set[str]:
         except OSError:
             continue  # the process ended, or is not ours to read
     return used
+
+
+def processes_with_env(name: str, value: str) -> list[int]:
+    """PIDs of the processes whose environment holds name=value (a run marks its processes so)."""
+    entry, found = f"{name}={value}\0".encode(), []
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            with open(f"/proc/{pid}/environ", "rb") as environ:
+                if entry in environ.read():
+                    found.append(int(pid))
+        except OSError:
+            continue  # ended meanwhile, or not ours to read
+    return found

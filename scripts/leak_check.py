@@ -25,20 +25,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from clnn_ros.rosenv import fast_dds_shm_files, shm_files_in_use
+from clnn_ros.rosenv import fast_dds_shm_files, processes_with_env, shm_files_in_use
 
 RSS_BOUND_MB = 20.0  # allowed resident-memory growth over the in-process runs (allocator noise)
-
-
-def processes_with(marker: str) -> list[int]:
-    found = []
-    for environ in Path("/proc").glob("[0-9]*/environ"):
-        try:
-            if f"CLNN_LEAK_RUN={marker}\0".encode() in environ.read_bytes():
-                found.append(int(environ.parent.name))
-        except OSError:
-            pass  # ended meanwhile
-    return found
 
 
 def rss_mb() -> float:
@@ -61,7 +50,7 @@ def separate_runs(runs: int, episode: list[str], workdir: Path) -> list[str]:
         result = subprocess.run([sys.executable, "-m", "clnn_ros.run_all", *episode, "--out",
                                  str(out)], env={**os.environ, "CLNN_LEAK_RUN": str(out)},
                                 capture_output=True, text=True, timeout=120)
-        left = processes_with(str(out))
+        left = processes_with_env("CLNN_LEAK_RUN", str(out))
         new_shm = fast_dds_shm_files() - shm_before - shm_files_in_use()  # in use: not ours
         print(f"process run {run + 1:2d}: exit {result.returncode}, "
               f"{time.monotonic() - started:5.1f} s, processes left {len(left)}, "

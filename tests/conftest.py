@@ -1,5 +1,6 @@
 """Session-wide test fixtures."""
 
+import os
 import subprocess
 from pathlib import Path
 
@@ -32,3 +33,10 @@ def remove_unused_fast_dds_files(names: set[str] | None = None) -> None:
     """Remove the Fast DDS files (all, or `names`) that no process uses: `fastdds shm clean`."""
     for name in (fast_dds_shm_files() if names is None else names) - shm_files_in_use():
         (Path(SHM) / name).unlink(missing_ok=True)
+
+
+def ros_environment(domain_id: str, tmp_path_factory) -> dict:
+    """The environment of a test module's ROS processes: its own domain, loopback discovery,
+    ROS logs in a temporary folder."""
+    return {**os.environ, "ROS_DOMAIN_ID": domain_id, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+            "ROS_LOG_DIR": str(tmp_path_factory.mktemp("ros_log"))}

@@ -20,6 +20,9 @@ from clnn_ros.core.optimal import optimal_weights
 from clnn_ros.core.params import Params
 from clnn_ros.core.physics import CONTINUE
 
+from conftest import ros_environment
+from test_graph import run_all
+
 DOMAIN_ID = str(30 + os.getpid() % 20)
 SEED = 1
 # tie_break=random and success_counter=carry: the random stream and the success count cross
@@ -30,13 +33,9 @@ CARRY_OPTIONS = ["--option", "tie_break=random", "--option", "success_counter=ca
 
 @pytest.fixture(scope="module")
 def ros_env(tmp_path_factory):
-    return {**os.environ, "ROS_DOMAIN_ID": DOMAIN_ID, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
-            "ROS_LOG_DIR": str(tmp_path_factory.mktemp("ros_log"))}
+    return ros_environment(DOMAIN_ID, tmp_path_factory)
 
 
-def run_all(env, *args, timeout=120):
-    return subprocess.run([sys.executable, "-m", "clnn_ros.run_all", "--quiet", *args], env=env,
-                          capture_output=True, text=True, timeout=timeout, check=False)
 
 
 def read_rows(out: Path) -> list[str]:

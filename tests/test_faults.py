@@ -17,14 +17,15 @@ from clnn_ros.nodes.common import TRIAL_EVENT
 from test_graph import processes_with, wait_for_line
 from test_recording import assert_every_tick, child, raw_messages, start_run
 
+from conftest import ros_environment
+
 DOMAIN_ID = str(10 + os.getpid() % 20)
 PROCESSES = ("environment", "encoder", "reward", "agent", "recorder", "trial_manager")
 
 
 @pytest.fixture(scope="module")
 def ros_env(tmp_path_factory):
-    return {**os.environ, "ROS_DOMAIN_ID": DOMAIN_ID, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
-            "ROS_LOG_DIR": str(tmp_path_factory.mktemp("ros_log"))}
+    return ros_environment(DOMAIN_ID, tmp_path_factory)
 
 
 def error_lines(stderr: str) -> list[str]:

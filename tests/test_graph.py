@@ -17,17 +17,16 @@ import pytest
 
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
-from clnn_ros.rosenv import fast_dds_shm_files, shm_files_in_use
+from clnn_ros.rosenv import fast_dds_shm_files, processes_with_env, shm_files_in_use
 
-from conftest import remove_unused_fast_dds_files
+from conftest import remove_unused_fast_dds_files, ros_environment
 
 DOMAIN_ID = str(100 + os.getpid() % 50)
 
 
 @pytest.fixture(scope="module")
 def ros_env(tmp_path_factory):
-    return {**os.environ, "ROS_DOMAIN_ID": DOMAIN_ID, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
-            "ROS_LOG_DIR": str(tmp_path_factory.mktemp("ros_log"))}
+    return ros_environment(DOMAIN_ID, tmp_path_factory)
 
 
 def run_all(env, *args, timeout=120):
@@ -95,11 +94,4 @@ def wait_for_line(stream, text: str, timeout: float = 60.0) -> str:
 
 def processes_with(marker: str) -> list[int]:
     """Processes whose environment holds CLNN_TEST_RUN=marker (run_all and the nodes it starts)."""
-    found = []
-    for environ in Path("/proc").glob("[0-9]*/environ"):
-        try:
-            if f"CLNN_TEST_RUN={marker}\0".encode() in environ.read_bytes():
-                found.append(int(environ.parent.name))
-        except OSError:
-            pass  # the process ended meanwhile
-    return found
+    return processes_with_env("CLNN_TEST_RUN", marker)

@@ -22,6 +22,8 @@ from clnn_ros.nodes.common import STATE
 
 from test_graph import processes_with, wait_for_line
 
+from conftest import ros_environment
+
 DOMAIN_ID = str(150 + os.getpid() % 50)
 REPO = Path(__file__).resolve().parents[1]
 PER_TICK = ("/clock", "/cartpole/state", "/rln/spikes", "/rln/reward", "/rln/action")
@@ -29,8 +31,7 @@ PER_TICK = ("/clock", "/cartpole/state", "/rln/spikes", "/rln/reward", "/rln/act
 
 @pytest.fixture(scope="module")
 def ros_env(tmp_path_factory):
-    return {**os.environ, "ROS_DOMAIN_ID": DOMAIN_ID, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
-            "ROS_LOG_DIR": str(tmp_path_factory.mktemp("ros_log"))}
+    return ros_environment(DOMAIN_ID, tmp_path_factory)
 
 
 @pytest.fixture(scope="module")
