@@ -32,6 +32,16 @@ def shm_files_in_use() -> set[str]:
     return used
 
 
+def remove_unused_fast_dds_files(names: set[str] | None = None) -> None:
+    """Remove the Fast DDS files (all, or `names`) that no process uses, as `fastdds shm clean`
+    does: what killed processes left behind."""
+    for name in (fast_dds_shm_files() if names is None else names) - shm_files_in_use():
+        try:
+            os.unlink(os.path.join(SHM, name))
+        except FileNotFoundError:
+            pass  # removed meanwhile
+
+
 def processes_with_env(name: str, value: str) -> list[int]:
     """PIDs of the processes whose environment holds name=value (a run marks its processes so)."""
     entry, found = f"{name}={value}\0".encode(), []

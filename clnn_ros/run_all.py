@@ -31,6 +31,7 @@ from pathlib import Path
 import yaml
 
 from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
+from .rosenv import remove_unused_fast_dds_files
 
 from .cli import OneLineArgumentParser
 from .core.checkpoint import OPTIMAL, Checkpoint, load_checkpoint
@@ -233,6 +234,8 @@ def stop_all(processes: dict) -> None:
             except subprocess.TimeoutExpired:
                 process.kill()
                 process.wait()
+            # A process stopped from outside may leave its Fast DDS shared memory behind.
+            remove_unused_fast_dds_files()
 
 
 def run_composed(values: dict, environment=EnvironmentNode) -> int:

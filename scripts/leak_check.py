@@ -42,7 +42,7 @@ def open_fds() -> int:
 
 
 def separate_runs(runs: int, episode: list[str], workdir: Path) -> list[str]:
-    problems = []
+    problems, forced = [], []
     shm_before = fast_dds_shm_files()
     for run in range(runs):
         out = workdir / f"run{run:02d}"
@@ -62,10 +62,15 @@ def separate_runs(runs: int, episode: list[str], workdir: Path) -> list[str]:
         if new_shm:
             problems.append(f"run {run + 1} left /dev/shm files {sorted(new_shm)}")
             shm_before |= new_shm  # report each file once
+        if "did not exit" in result.stderr:
+            forced.append(run + 1)
         if result.returncode != 0 or left or new_shm:
             print(f"process run {run + 1} stderr:\n{result.stderr}", file=sys.stderr, flush=True)
         if not (out / "run.mcap").stat().st_size:
             problems.append(f"run {run + 1} left an empty bag")
+    if forced:  # handled (terminated, its files removed), but worth knowing
+        print(f"process runs {forced}: a node did not exit within run_all's grace period and was "
+              f"terminated", flush=True)
     return problems
 
 

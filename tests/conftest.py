@@ -2,11 +2,10 @@
 
 import os
 import subprocess
-from pathlib import Path
 
 import pytest
 
-from clnn_ros.rosenv import SHM, fast_dds_shm_files, shm_files_in_use
+from clnn_ros.rosenv import fast_dds_shm_files, remove_unused_fast_dds_files
 
 
 @pytest.fixture(scope="session")
@@ -27,12 +26,6 @@ def remove_shared_memory_of_killed_nodes():
     before = fast_dds_shm_files()
     yield
     remove_unused_fast_dds_files(fast_dds_shm_files() - before)
-
-
-def remove_unused_fast_dds_files(names: set[str] | None = None) -> None:
-    """Remove the Fast DDS files (all, or `names`) that no process uses: `fastdds shm clean`."""
-    for name in (fast_dds_shm_files() if names is None else names) - shm_files_in_use():
-        (Path(SHM) / name).unlink(missing_ok=True)
 
 
 def ros_environment(domain_id: str, tmp_path_factory) -> dict:

@@ -17,9 +17,10 @@ import pytest
 
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
-from clnn_ros.rosenv import fast_dds_shm_files, processes_with_env, shm_files_in_use
+from clnn_ros.rosenv import (fast_dds_shm_files, processes_with_env,
+                             remove_unused_fast_dds_files, shm_files_in_use)
 
-from conftest import remove_unused_fast_dds_files, ros_environment
+from conftest import ros_environment
 
 DOMAIN_ID = str(100 + os.getpid() % 50)
 

@@ -83,7 +83,7 @@ ALIVE_TIMEOUT_S = 1.0
 # history, so a slow recorder slows the graph down instead of losing messages.
 RECORDED = "/recorder/progress"
 RECORDER_WINDOW = 500
-ACK_WAIT_S = 3.0  # a node's last messages reach the recorder before the node exits (or this)
+ACK_WAIT_S = 2.0  # a node's last messages reach the recorder before the node exits (or this)
 PROGRESS_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                           history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
 # A readiness announcement must reach a trial manager that starts later than the node; the

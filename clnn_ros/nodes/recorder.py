@@ -24,6 +24,7 @@ import time
 from pathlib import Path
 
 from .. import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
+from ..rosenv import remove_unused_fast_dds_files
 
 from mcap.writer import CompressionType, Writer
 from rclpy.node import Node
@@ -227,6 +228,8 @@ def stop(process, status: int, grace_s: float = 5.0) -> None:
             process.send_signal(sig)
         try:
             process.wait(timeout=wait_s)
+            if sig is not None:  # stopped from outside: its Fast DDS files may be left
+                remove_unused_fast_dds_files()
             return
         except subprocess.TimeoutExpired:
             pass
