@@ -38,9 +38,8 @@ from .core.checkpoint import OPTIMAL, Checkpoint, load_checkpoint
 from .core.episode import start_from_setting
 from .core.params import ParamError, Params, params_from_strings
 from .nodes.agent import AgentNode
-from .nodes.common import (RUN_SETTINGS, catch_signals, convert_setting, make_executor,
-                           read_params_file, ros_session,
-                           spin_until_finished)
+from .nodes.common import (RUN_SETTINGS, catch_signals, convert_setting, read_params_file,
+                           ros_session, spin_until_finished)
 from .nodes import recorder as recorder_node
 from .nodes.encoder import EncoderNode
 from .nodes.environment import EnvironmentNode
@@ -222,20 +221,22 @@ def run_separate(values: dict, workdir: Path, env_command: list[str]) -> int:
 def stop_all(processes: dict) -> None:
     """Give every node the grace period to exit by itself, then terminate, then kill."""
     deadline = time.monotonic() + SHUTDOWN_GRACE_S
+    forced = False
     for name, process in processes.items():
         try:
             process.wait(timeout=max(0.0, deadline - time.monotonic()))
         except subprocess.TimeoutExpired:
             print(f"run_all: warning: node {name} did not exit within {SHUTDOWN_GRACE_S:g} s; "
                   f"terminating it", file=sys.stderr, flush=True)
+            forced = True
             process.terminate()
             try:
                 process.wait(timeout=2.0)
             except subprocess.TimeoutExpired:
                 process.kill()
                 process.wait()
-            # A process stopped from outside may leave its Fast DDS shared memory behind.
-            remove_unused_fast_dds_files()
+    if forced:  # a process stopped from outside may leave its Fast DDS shared memory behind
+        remove_unused_fast_dds_files()
 
 
 def run_composed(values: dict, environment=EnvironmentNode) -> int:
@@ -244,10 +245,7 @@ def run_composed(values: dict, environment=EnvironmentNode) -> int:
         try:
             for cls in (environment, EncoderNode, RewardNode, AgentNode, TrialManagerNode):
                 nodes.append(cls(overrides=values))
-            executor = make_executor()
-            for node in nodes:
-                executor.add_node(node)
-            spin_until_finished(executor, nodes[-1].finished, signals)
+            spin_until_finished(nodes, nodes[-1].finished, signals)
             if signals:
                 for node in nodes:
                     node.interrupted()

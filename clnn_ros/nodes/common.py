@@ -397,9 +397,13 @@ def split_ros_arguments(argv: list[str]) -> tuple[list[str], list[str]]:
     return ros, others
 
 
-def spin_until_finished(executor, finished: Future, signals: list[int]) -> None:
-    """Spin until `finished` is done or a signal arrived. (EventsExecutor's own
-    spin_until_future_complete does not return when a callback completes the future.)"""
+def spin_until_finished(nodes: list[Node], finished: Future, signals: list[int]) -> None:
+    """Spin `nodes` on one executor (make_executor) until `finished` is done or a signal
+    arrived. (EventsExecutor's own spin_until_future_complete does not return when a callback
+    completes the future.)"""
+    executor = make_executor()
+    for node in nodes:
+        executor.add_node(node)
     while not finished.done() and not signals:
         executor.spin_once(timeout_sec=0.1)
 
@@ -421,9 +425,7 @@ def node_main(factory: Callable[[], GraphNode], argv: list[str] | None = None) -
             print(f"{prog}: error: {error}", file=sys.stderr)
             return 2
         try:
-            executor = make_executor()
-            executor.add_node(node)
-            spin_until_finished(executor, node.finished, signals)
+            spin_until_finished([node], node.finished, signals)
             if signals:
                 node.interrupted()
                 return 128 + signals[0]

@@ -37,7 +37,7 @@ from clnn_ros_msgs.msg import TrialEvent
 
 from .. import bag
 from .common import (PROGRESS_QOS, READY, READY_QOS, RECORDED, TRIAL_EVENT,
-                     Alive, make_executor, ros_session, spin_until_finished)
+                     Alive, ros_session, spin_until_finished)
 
 NAME = "recorder"
 PER_TICK = ("/clock", "/cartpole/state", "/rln/spikes", "/rln/reward", "/rln/action")
@@ -174,9 +174,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"recorder: error: {error}", file=sys.stderr)
             return 2
         try:
-            executor = make_executor()
-            executor.add_node(node)
-            spin_until_finished(executor, node.finished, signals)
+            spin_until_finished([node], node.finished, signals)
             return 128 + signals[0] if signals else node.finished.result()
         finally:
             node.close()

@@ -26,9 +26,9 @@ from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Empty, String, UInt64
 
 from ..core.episode import seed_setup, start_from_setting
-from .common import (ACTION, ALIVE, ALIVE_QOS, ALIVE_TIMEOUT_S, CLOCK, GRAPH_NODES, PROGRESS_QOS, READY,
-                     READY_QOS, RECORDED, RECORDER_WINDOW, REWARD, SPIKES, STATE, TRIAL_EVENT,
-                     WEIGHTS, GraphNode, TickJoin, node_main)
+from .common import (ACTION, ALIVE, ALIVE_QOS, ALIVE_TIMEOUT_S, CLOCK, GRAPH_NODES,
+                     PROGRESS_QOS, READY, READY_QOS, RECORDED, RECORDER_WINDOW, REWARD, SPIKES,
+                     STATE, TRIAL_EVENT, WEIGHTS, GraphNode, TickJoin, node_main)
 
 STARTUP_TIMEOUT_S = 60.0  # process start, imports and discovery of the whole graph
 CONFIRM_S = 0.3  # a node without heartbeats is dead once the graph has stopped for this long
@@ -66,7 +66,8 @@ class TrialManagerNode(GraphNode):
         self.create_subscription(String, READY, self.on_ready, READY_QOS)
         self.recorded_tick = -1
         self.held = None  # (tick, starts a trial): the next tick, waiting for the recorder
-        if "recorder" in self.extra_nodes:
+        self.follows_recorder = "recorder" in self.extra_nodes
+        if self.follows_recorder:
             self.create_subscription(UInt64, RECORDED, self.on_recorded, PROGRESS_QOS)
         self.heard = {}  # node: when its last heartbeat came
         self.watched = (*GRAPH_NODES, *sorted(self.extra_nodes))
@@ -150,7 +151,7 @@ class TrialManagerNode(GraphNode):
     def advance(self, tick: int, starts_trial: bool) -> None:
         """Publish tick `tick` (START first if it starts a trial), unless the recorder is more
         than RECORDER_WINDOW ticks behind: then hold it until the recorder's progress comes."""
-        if "recorder" in self.extra_nodes and tick > self.recorded_tick + RECORDER_WINDOW:
+        if self.follows_recorder and tick > self.recorded_tick + RECORDER_WINDOW:
             self.held = (tick, starts_trial)
             return
         if starts_trial:
