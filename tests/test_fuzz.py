@@ -45,10 +45,11 @@ def test_every_fuzz_message_is_refused_and_the_episode_equals_the_core(tmp_path,
     seed, trials, max_steps, per_topic = 2, 16, 1500, 1000
     report_path, graph_log = tmp_path / "fuzz.json", tmp_path / "graph_stderr.txt"
     # The fuzzer starts first and waits for the graph (a participant that joins a running
-    # graph late is discovered late); on every tick it sends 5 messages per topic.
+    # graph late is discovered late); on every tick it sees it sends 10 messages per topic
+    # (it sees only some ticks of a composed graph: 1,000 per topic must fit in the episode).
     fuzzer = subprocess.Popen(
         [sys.executable, str(FUZZER), "--seed", "7", "--per-topic", str(per_topic),
-         "--per-tick", "5", "--max-steps", str(max_steps), "--report", str(report_path)],
+         "--per-tick", "10", "--max-steps", str(max_steps), "--report", str(report_path)],
         env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         with open(graph_log, "w") as stderr:  # 15,000 refusal lines: a file, not a pipe
