@@ -29,8 +29,8 @@ import numpy as np
 from .bag import TOPIC_TYPES, BagError, Decoder, iter_raw, open_bag
 from .cli import OneLineArgumentParser
 from .core.params import ParamError, Params, params_from_strings
-from .nodes.common import (ACTION, CLOCK, REWARD, RUN_SETTINGS, SPIKES, STATE, TRIAL_EVENT,
-                           WEIGHTS)
+from .names import (ACTION, CLOCK, REWARD, RUN_SETTINGS, SPIKES, STATE, TRIAL_EVENT,
+                    WEIGHTS)
 
 TRIALS_HEADER = ["seed", "trial", "initial_angle_deg", "steps", "end_reason"]
 START, END, EPISODE_END = 0, 1, 2

@@ -25,18 +25,7 @@ from pathlib import Path
 
 import yaml
 
-from .nodes.common import ACTION, CLOCK, REWARD, SPIKES, STATE, TRIAL_EVENT, WEIGHTS
-
-# Every topic of the graph and its type, in causal order within a tick.
-TOPIC_TYPES = {
-    CLOCK: "rosgraph_msgs/msg/Clock",
-    TRIAL_EVENT: "clnn_ros_msgs/msg/TrialEvent",
-    STATE: "clnn_ros_msgs/msg/CartPoleState",
-    SPIKES: "clnn_ros_msgs/msg/SpikeVector",
-    REWARD: "clnn_ros_msgs/msg/Reward",
-    ACTION: "clnn_ros_msgs/msg/Action",
-    WEIGHTS: "clnn_ros_msgs/msg/WeightSnapshot",
-}
+from .names import TOPIC_TYPES, graph_topic
 CHUNK_SIZE = 512 * 1024  # about 1,000 ticks of the graph per chunk
 ROSBAG2_VERSION = 9      # the bag format of ROS 2 Jazzy
 PRIMITIVES = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
@@ -162,7 +151,7 @@ def rosbag2_metadata(path: Path, topics: list[dict], counts: dict, start_ns: int
                                "serialization_format": "cdr",
                                "offered_qos_profiles": t["qos"],
                                "type_description_hash": t["hash"]},
-            "message_count": counts.get(t["name"], 0)} for t in topics],
+            "message_count": counts.get(t.get("topic", t["name"]), 0)} for t in topics],
         "compression_format": "", "compression_mode": "",
         "files": [{"path": path.name, "starting_time": {"nanoseconds_since_epoch": start_ns},
                    "duration": {"nanoseconds": duration}, "message_count": total}],
@@ -208,14 +197,15 @@ def open_bag(path, salvage: bool = False):
 
 
 def iter_raw(reader, topics=None):
-    """(schema, topic, publish_time, log_time, cdr bytes) of the bag's messages in file order; a
+    """(schema, topic, publish_time, log_time, cdr bytes) of the bag's messages in file order,
+    the graph's topics by their relative names (a run in a namespace reads as any other); a
     salvaged (truncated) file ends quietly at its last complete record."""
     from mcap.exceptions import McapError
     from mcap.reader import NonSeekingReader
     try:
         for schema, channel, message in reader.iter_messages(topics=topics,
                                                              log_time_order=False):
-            yield schema, channel.topic, message.publish_time, message.log_time, message.data
+            yield schema, graph_topic(channel.topic), message.publish_time, message.log_time, message.data
     except (McapError, EOFError, struct.error, ValueError) as error:
         if not isinstance(reader, NonSeekingReader):
             raise BagError(f"damaged MCAP: {error}") from None

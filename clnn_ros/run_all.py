@@ -22,7 +22,6 @@ import os
 import shlex
 import shutil
 import signal
-import subprocess
 import sys
 import tempfile
 import time
@@ -31,34 +30,33 @@ from pathlib import Path
 import yaml
 
 from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
-from .rosenv import remove_unused_fast_dds_files
 
 from .cli import OneLineArgumentParser
 from .core.checkpoint import OPTIMAL, Checkpoint, load_checkpoint
 from .core.episode import start_from_setting
 from .core.params import ParamError, Params, params_from_strings
-from .nodes.agent import AgentNode
-from .nodes.common import (RUN_SETTINGS, catch_signals, convert_setting, read_params_file,
-                           ros_session, spin_until_finished)
-from .nodes import recorder as recorder_node
-from .nodes.encoder import EncoderNode
-from .nodes.environment import EnvironmentNode
-from .nodes.gymnasium_env import GymnasiumEnvironmentNode
-from .nodes.reward import RewardNode
-from .nodes.trial_manager import TrialManagerNode
+from .names import GRAPH_NODES, RECORDER, RUN_SETTINGS, TRIAL_MANAGER
+from .nodes.common import EXIT_WITH_STDIN, catch_signals
+from .nodes.parameters import convert_setting, read_params_file
+from .supervise import Supervisor
 
-NODES = ("environment", "encoder", "reward", "agent", "trial_manager")
+NODES = (*GRAPH_NODES, TRIAL_MANAGER)
 # The demonstration: seed 0 goes from 32 steps to the 10,000 cap by trial 11 (about 80k ticks).
 DEMO = dict(seed=0, trials=20, nsv=1)
-# --env: the environment node (docs/ENV_CONTRACT.md): module and class for composed mode.
-ENVIRONMENTS = {"cartpole": ("clnn_ros.nodes.environment", EnvironmentNode),
-                "gymnasium": ("clnn_ros.nodes.gymnasium_env", GymnasiumEnvironmentNode)}
+# --env: the environment node (docs/ENV_CONTRACT.md): module and class for composed mode;
+# external: none is started, one started by someone else is waited for.
+ENVIRONMENTS = {"cartpole": ("clnn_ros.nodes.environment", "EnvironmentNode"),
+                "gymnasium": ("clnn_ros.nodes.gymnasium_env", "GymnasiumEnvironmentNode"),
+                "external": None}
 # Run settings that run_all sets itself: a value given would be overwritten (out_dir) or make
 # the graph wait for a participant that never comes (extra_nodes, the recorder's name).
-RUN_ALL_SETS = {"out_dir": "--out", "extra_nodes": "--bag / --no-record"}
+RUN_ALL_SETS = {"out_dir": "--out", "extra_nodes": "--bag / --no-record",
+                "external_nodes": "--env external"}
 # --env-node: a command starting with one of these runs with run_all's interpreter (its venv).
 PYTHON_NAMES = ("python", "python3")
 SHUTDOWN_GRACE_S = 5.0  # how long nodes get to exit after the episode ends or Ctrl-C
+RECORDER_GRACE_S = 5.0  # how long the recorder gets to finish the bag after the nodes
+PROBE_S = 0.5  # how long run_all looks for another graph of its names before it starts one
 
 
 def parse_args(argv):
@@ -80,7 +78,12 @@ def parse_args(argv):
     parser.add_argument("--composed", action="store_true",
                         help="all nodes in one process with one executor")
     parser.add_argument("--env", choices=tuple(ENVIRONMENTS), default="cartpole",
-                        help="environment node: the paper's cart-pole or gymnasium's CartPole-v1")
+                        help="environment node: the paper's cart-pole, gymnasium's CartPole-v1, "
+                             "or external: start none and wait (--stall-timeout) for one that "
+                             "someone else starts (a robot's; docs/ENV_CONTRACT.md)")
+    parser.add_argument("--namespace", metavar="NAME",
+                        help="put every node and topic under /NAME/ (several graphs on one "
+                             "ROS domain)")
     parser.add_argument("--env-node", metavar="CMD",
                         help="run this command as the environment node instead (it gets "
                              "--ros-args --params-file <the run's params> appended; it must keep "
@@ -129,6 +132,23 @@ def check_paths_and_commands(parser: argparse.ArgumentParser, args) -> None:
             parser.error("--env-node runs its own process: not with --composed")
         if command[0] not in PYTHON_NAMES and shutil.which(command[0]) is None:
             parser.error(f"--env-node: no program {command[0]!r} found")
+        if args.env == "external":
+            parser.error("--env-node starts the environment that --env external does not: "
+                         "give one of them")
+    if args.namespace is not None:
+        if problem := namespace_problem(args.namespace):
+            parser.error(f"--namespace {args.namespace!r}: {problem}")
+
+
+def namespace_problem(name: str) -> str | None:
+    """Why `name` is not a ROS namespace (tokens of letters, digits and _, not starting with a
+    digit, separated by /), or None."""
+    tokens = name.strip("/").split("/")
+    if not name.strip("/") or not all(t and (t[0].isalpha() or t[0] == "_") and
+                                      all(c.isalnum() or c == "_" for c in t) and t.isascii()
+                                      for t in tokens):
+        return "expected letters, digits and _ (not starting with a digit), '/' between levels"
+    return None
 
 
 def cannot_create(directory: Path) -> str | None:
@@ -193,67 +213,147 @@ def checkpoint_values(checkpoint: Checkpoint) -> dict:
             "nsv": checkpoint.params.nsv}
 
 
-def run_separate(values: dict, workdir: Path, env_command: list[str]) -> int:
+def ros_arguments(params_file: Path, namespace: str) -> list[str]:
+    """The --ros-args of every node of the run: the parameters, and the namespace with the sim
+    clock moved into it (use_sim_time subscribes to the absolute /clock)."""
+    arguments = ["--ros-args", "--params-file", str(params_file), "--log-level", "warn"]
+    if namespace != "/":
+        arguments += ["-r", f"__ns:={namespace}", "-r", f"/clock:={namespace}/clock"]
+    return arguments
+
+
+def child_environment() -> dict:
+    return {**os.environ, EXIT_WITH_STDIN: "1"}
+
+
+def another_graph(namespace: str) -> list[str]:
+    """Names of this graph's nodes that already run in `namespace` on this ROS domain (looked
+    for during PROBE_S: discovery of a running participant takes a fraction of that)."""
+    import rclpy
+    from rclpy.node import Node
+    context = rclpy.Context()
+    rclpy.init(args=[], context=context)
+    try:
+        probe = Node("_run_all_probe", context=context, enable_rosout=False,
+                     start_parameter_services=False)
+        deadline, found = time.monotonic() + PROBE_S, set()
+        while time.monotonic() < deadline and not found:
+            time.sleep(0.05)
+            found = {name for name, ns in probe.get_node_names_and_namespaces()
+                     if ns == namespace and name in (*NODES, RECORDER)}
+        probe.destroy_node()
+        return sorted(found)
+    finally:
+        context.try_shutdown()
+
+
+def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
+                 env_command: list[str] | None, namespace: str,
+                 interrupted: list[int]) -> tuple[int, str | None]:
+    """Start the nodes (env_command None: no environment) and watch them until the trial
+    manager ends. Returns (its exit status, or 128 + signal; the failure run_all saw itself:
+    a node that exited with an error, named with how)."""
     params_file = workdir / "params.yaml"
     params_file.write_text(yaml.safe_dump({"/**": {"ros__parameters": values}}))
-    processes = {}
+    arguments = ros_arguments(params_file, namespace)
     for name in NODES:
         command = env_command if name == "environment" else \
             [sys.executable, "-m", f"clnn_ros.nodes.{name}"]
-        processes[name] = subprocess.Popen(
-            [*command, "--ros-args", "--params-file", str(params_file), "--log-level", "warn"])
-    interrupted = catch_signals()
-    manager = processes["trial_manager"]
-    try:
-        while manager.poll() is None and not interrupted:
-            time.sleep(0.05)
-        if interrupted or manager.returncode < 0:  # no EPISODE_END came: stop the graph now
-            for process in processes.values():
-                if process.poll() is None:
-                    process.send_signal(signal.SIGINT)
-    finally:
-        stop_all(processes)
+        if command is not None:
+            supervisor.start(name, [*command, *arguments], child_environment())
+    manager = supervisor.children[TRIAL_MANAGER]
+    failure = None
+    while manager.returncode is None and not interrupted:
+        if failed := supervisor.first_failure(exclude={TRIAL_MANAGER}):
+            failure = failed
+            break
+        time.sleep(0.02)
+    nodes = [n for n in NODES if n in supervisor.children]
+    if interrupted or failure or manager.returncode < 0:  # no EPISODE_END came: stop now
+        forced = supervisor.stop(nodes, SHUTDOWN_GRACE_S, interrupt=True)
+    else:
+        forced = supervisor.stop(nodes, SHUTDOWN_GRACE_S, interrupt=False)
+    warn_forced(forced)
     if interrupted:
-        return 128 + interrupted[0]
-    return manager.returncode
+        return 128 + interrupted[0], None
+    return manager.returncode, failure.describe_exit() if failure else None
 
 
-def stop_all(processes: dict) -> None:
-    """Give every node the grace period to exit by itself, then terminate, then kill."""
-    deadline = time.monotonic() + SHUTDOWN_GRACE_S
-    forced = False
-    for name, process in processes.items():
-        try:
-            process.wait(timeout=max(0.0, deadline - time.monotonic()))
-        except subprocess.TimeoutExpired:
-            print(f"run_all: warning: node {name} did not exit within {SHUTDOWN_GRACE_S:g} s; "
-                  f"terminating it", file=sys.stderr, flush=True)
-            forced = True
-            process.terminate()
-            try:
-                process.wait(timeout=2.0)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait()
-    if forced:  # a process stopped from outside may leave its Fast DDS shared memory behind
-        remove_unused_fast_dds_files()
+def warn_forced(names: list[str]) -> None:
+    for name in names:
+        print(f"run_all: warning: node {name} did not exit within {SHUTDOWN_GRACE_S:g} s; "
+              f"terminated", file=sys.stderr, flush=True)
 
 
-def run_composed(values: dict, environment=EnvironmentNode) -> int:
-    with ros_session() as signals:
-        nodes = []
-        try:
-            for cls in (environment, EncoderNode, RewardNode, AgentNode, TrialManagerNode):
-                nodes.append(cls(overrides=values))
-            spin_until_finished(nodes, nodes[-1].finished, signals)
-            if signals:
-                for node in nodes:
-                    node.interrupted()
-                return 128 + signals[0]
-            return nodes[-1].finished.result()
-        finally:
+def run_composed(values: dict, environment: str | None, namespace: str,
+                 interrupted: list[int]) -> int:
+    """All nodes in this process on one executor."""
+    import importlib
+    from .nodes.agent import AgentNode
+    from .nodes.common import init_rclpy, spin_until_finished
+    from .nodes.encoder import EncoderNode
+    from .nodes.reward import RewardNode
+    from .nodes.trial_manager import TrialManagerNode
+    import rclpy
+    classes = [EncoderNode, RewardNode, AgentNode, TrialManagerNode]
+    if environment is not None:
+        module, name = ENVIRONMENTS[environment]
+        classes.insert(0, getattr(importlib.import_module(module), name))
+    init_rclpy([sys.argv[0]])
+    nodes = []
+    try:
+        options = dict(overrides=values, namespace=None if namespace == "/" else namespace,
+                       cli_args=["--ros-args", "-r", f"/clock:={namespace}/clock"]
+                       if namespace != "/" else None)
+        for cls in classes:
+            nodes.append(cls(**options))
+        spin_until_finished(nodes, nodes[-1].finished, interrupted)
+        if interrupted:
             for node in nodes:
-                node.destroy_node()
+                node.interrupted()
+            return 128 + interrupted[0]
+        return nodes[-1].finished.result()
+    finally:
+        for node in nodes:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+def start_recorder(supervisor: Supervisor, values: dict, bag_path: Path, workdir: Path,
+                   namespace: str) -> None:
+    """The recorder: its own process, also in composed mode; OSError if the bag cannot be
+    created."""
+    bag_path.parent.mkdir(parents=True, exist_ok=True)
+    open(bag_path, "wb").close()
+    params_file = workdir / "recorder_params.yaml"
+    params_file.write_text(yaml.safe_dump({"/**": {"ros__parameters": {
+        **values, "bag_path": str(bag_path)}}}))
+    supervisor.start(RECORDER, [sys.executable, "-m", "clnn_ros.nodes.recorder",
+                                *ros_arguments(params_file, namespace)], child_environment())
+
+
+def stop_recorder(supervisor: Supervisor, episode_ended: bool) -> None:
+    """After the nodes: the recorder ends by itself after EPISODE_END; otherwise (Ctrl-C, the
+    trial manager stopped from outside) it is told to finish the bag now."""
+    warn_forced(supervisor.stop([RECORDER], RECORDER_GRACE_S, interrupt=not episode_ended))
+
+
+def default_bag_path(out_dir: Path | None) -> Path:
+    """<out>/run.mcap with --out, else bags/run_<UTC time>.mcap under the current directory."""
+    if out_dir is not None:
+        return Path(out_dir) / "run.mcap"
+    return Path("bags") / time.strftime("run_%Y%m%d_%H%M%S.mcap", time.gmtime())
+
+
+def fresh_summary(out: Path, since: float) -> dict:
+    """The trial manager's summary.json of this run ({} if it wrote none)."""
+    path = out / "summary.json"
+    try:
+        if path.stat().st_mtime >= since:
+            return json.loads(path.read_text())
+    except (OSError, ValueError):
+        pass
+    return {}
 
 
 def main(argv=None) -> int:
@@ -265,66 +365,113 @@ def main(argv=None) -> int:
     except ParamError as error:  # a CheckpointError too
         print(f"run_all: error: {error}", file=sys.stderr)
         return 2
-    module, environment = ENVIRONMENTS[args.env]
     if args.env == "gymnasium" and args.env_node is None and \
             params_from_strings({"tau": values.get("tau", 0.02)}).tau != 0.02:
         print("run_all: error: --env gymnasium steps gymnasium's tau of 0.02 s, got tau="
               f"{values['tau']}", file=sys.stderr)
         return 2
-    env_command = [sys.executable, "-m", module]
+    namespace = "/" + args.namespace.strip("/") if args.namespace else "/"
+    environment = None if args.env == "external" else args.env
+    env_command = None
     if args.env_node is not None:
         env_command = shlex.split(args.env_node)  # checked by parse_args
         if env_command[0] in PYTHON_NAMES:
             env_command[0] = sys.executable
+    elif environment is not None:
+        env_command = [sys.executable, "-m", ENVIRONMENTS[environment][0]]
+    else:
+        values["external_nodes"] = "environment"
+    interrupted = catch_signals()
+    supervisor = Supervisor()
+    try:
+        return run(args, values, checkpoint, supervisor, namespace, environment, env_command,
+                   interrupted)
+    finally:
+        for problem in supervisor.close():
+            print(f"run_all: warning: {problem}", file=sys.stderr)
+
+
+def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
+        environment: str | None, env_command: list[str] | None, interrupted: list[int]) -> int:
+    if running := another_graph(namespace):
+        print(f"run_all: error: a graph already runs in namespace {namespace} on ROS domain "
+              f"{os.environ.get('ROS_DOMAIN_ID') or '0'} (nodes {', '.join(running)}); give "
+              f"this one --namespace NAME or another ROS_DOMAIN_ID", file=sys.stderr)
+        return 1
+    began = time.time()
     with tempfile.TemporaryDirectory(prefix="clnn_ros_") as tmp:
         out = args.out or Path(tmp) / "out"
         values["out_dir"] = str(out.resolve())
-        bag_path = recorder = died = None
-        if not args.no_record:  # the recorder: its own process, also in composed mode
-            bag_path = args.bag or recorder_node.default_bag_path(args.out)
+        bag_path = None
+        if not args.no_record:
+            bag_path = (args.bag or default_bag_path(args.out)).resolve()
             try:
-                recorder = recorder_node.launch(values, bag_path, Path(tmp))
+                start_recorder(supervisor, {**values, "extra_nodes": ""}, bag_path, Path(tmp),
+                               namespace)
             except OSError as error:
                 print(f"run_all: error: cannot write the bag {bag_path}: {error}", file=sys.stderr)
                 return 2
-            values["extra_nodes"] = recorder_node.NAME
+            values["extra_nodes"] = RECORDER
             print(f"run_all: recording to {bag_path}", flush=True)
-        mode = "composed (one process)" if args.composed else f"{len(NODES)} processes"
-        print(f"run_all: seed {values['seed']}, {values['trials']} trials, {values['nsv']} SV, "
-              f"{mode}" + (f", environment: {args.env_node or args.env}"
-                           if args.env_node or args.env != "cartpole" else ""), flush=True)
-        if checkpoint is not None:
-            print(f"run_all: resuming {args.init_weights} at trial {checkpoint.next_trial + 1} "
-                  f"of {values['trials']}"
-                  + (f" (saved at its step {checkpoint.trial_step}: the trial restarts from its "
-                     f"beginning with the weights of that moment)" if checkpoint.trial_step
-                     else ""), flush=True)
-        elif args.init_weights:
-            print(f"run_all: new episode with the weights {args.init_weights}", flush=True)
-        status = run_composed(values, environment) if args.composed else \
-            run_separate(values, Path(tmp), env_command)
-        if recorder is not None:
-            recorder_node.stop(recorder, status)
-        if status < 0:
-            died = f"the trial manager died ({signal.Signals(-status).name})"
-            status = 1
-        summary_file = out / "summary.json"
-        summary = json.loads(summary_file.read_text()) if summary_file.exists() else {}
-        if summary:
-            rate = summary["ticks_per_s"] or 0.0
-            mean = summary["mean_steps"]
-            print(f"run_all: {summary['exit_reason']}: {summary['trials']} trials, mean steps "
-                  f"{mean if mean is None else round(mean, 1)}, {summary['ticks']} ticks, "
-                  f"{rate:.0f} ticks/s" + (f"; results in {args.out}" if args.out else ""))
+        announce(args, values, checkpoint, namespace)
+        if environment is None and args.env_node is None:
+            print(f"run_all: waiting for an environment node in namespace {namespace} (at most "
+                  f"{values.get('stall_timeout_s', RUN_SETTINGS['stall_timeout_s']):g} s once the "
+                  f"rest is ready)", flush=True)
+        failure = None
+        if args.composed:
+            status = run_composed(values, environment, namespace, interrupted)
+        else:
+            status, failure = run_separate(supervisor, values, Path(tmp), env_command,
+                                           namespace, interrupted)
+        if bag_path is not None:
+            recorder = supervisor.children[RECORDER]
+            if failure is None and recorder.returncode not in (None, 0):
+                failure = recorder.describe_exit()  # it failed first: the graph then stopped
+            stop_recorder(supervisor, episode_ended=status in (0, 1) and failure is None)
+            if failure is None and recorder.returncode not in (0, 128 + signal.SIGINT):
+                failure = recorder.describe_exit()
+        summary = fresh_summary(out, began)
+    if summary and failure is None:
+        mean = summary["mean_steps"]
+        print(f"run_all: {summary['exit_reason']}: {summary['trials']} trials, mean steps "
+              f"{mean if mean is None else round(mean, 1)}, {summary['ticks']} ticks, "
+              f"{summary['ticks_per_s'] or 0.0:.0f} ticks/s"
+              + (f"; results in {args.out}" if args.out else ""))
     if bag_path is not None:
-        print(f"run_all: bag {bag_path}", flush=True)
-    if status in (128 + signal.SIGINT, 128 + signal.SIGTERM):
+        if bag_path.exists() and bag_path.stat().st_size == 0:
+            bag_path.unlink()  # created here to check it could be; the recorder never started
+        print(f"run_all: bag {bag_path}" if bag_path.exists() else
+              f"run_all: nothing recorded, no bag", flush=True)
+    if status in (128 + signal.SIGINT, 128 + signal.SIGTERM) and failure is None:
         print("run_all: interrupted", file=sys.stderr)
-    elif status != 0:
-        reason = died or summary.get("exit_reason") or \
-            f"the trial manager exited with status {status}"
+        return status
+    if failure is not None:
+        at = f" at tick {summary['ticks'] - 1}" if summary.get("ticks") else ""
+        print(f"run_all: error: {failure}{at}", file=sys.stderr)
+        return 1
+    if status != 0:
+        reason = summary.get("exit_reason") or (
+            f"the trial manager {'died (' + signal.Signals(-status).name + ')' if status < 0 else f'exited with status {status}'}")
         print(f"run_all: error: {reason}", file=sys.stderr)
-    return status
+        return 1
+    return 0
+
+
+def announce(args, values: dict, checkpoint, namespace: str) -> None:
+    mode = "composed (one process)" if args.composed else f"{len(NODES)} processes"
+    print(f"run_all: seed {values['seed']}, {values['trials']} trials, {values['nsv']} SV, "
+          f"{mode}" + (f", environment: {args.env_node or args.env}"
+                       if args.env_node or args.env != "cartpole" else "")
+          + (f", namespace {namespace}" if namespace != "/" else ""), flush=True)
+    if checkpoint is not None:
+        print(f"run_all: resuming {args.init_weights} at trial {checkpoint.next_trial + 1} "
+              f"of {values['trials']}"
+              + (f" (saved at its step {checkpoint.trial_step}: the trial restarts from its "
+                 f"beginning with the weights of that moment)" if checkpoint.trial_step
+                 else ""), flush=True)
+    elif args.init_weights:
+        print(f"run_all: new episode with the weights {args.init_weights}", flush=True)
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """Agent node: two RLNs. Spike vector + reward of a tick -> three-factor update, inference,
 tagging -> action. At the end of each trial it saves its checkpoint (<out_dir>/checkpoint.npz:
 the state the episode resumes from) and publishes its weights. The service
-/agent/save_checkpoint (std_srvs/Trigger) saves the state after the last completed tick to
+~/save_checkpoint (std_srvs/Trigger; /agent/save_checkpoint in the root namespace) saves the state after the last completed tick to
 <out_dir>/checkpoint_<tick>.npz and answers with the path.
 
     python -m clnn_ros.nodes.agent --ros-args -p seed:=1 -p nsv:=1
@@ -18,9 +18,9 @@ from std_srvs.srv import Trigger
 from ..core.checkpoint import capture, save_checkpoint
 from ..core.episode import start_from_setting
 from ..core.rln import REWARD_KINDS
-from .common import ACTION, REWARD, SPIKES, WEIGHTS, GraphNode, TickJoin, node_main
+from ..names import ACTION, REWARD, SAVE_CHECKPOINT, SPIKES, WEIGHTS
+from .common import GraphNode, TickJoin, node_main
 
-SAVE_CHECKPOINT = "/agent/save_checkpoint"  # std_srvs/Trigger: save now, answer the path
 
 
 class AgentNode(GraphNode):

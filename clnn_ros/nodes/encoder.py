@@ -8,7 +8,8 @@ from __future__ import annotations
 from clnn_ros_msgs.msg import CartPoleState, SpikeVector
 
 from ..core.encoder import Encoder
-from .common import SPIKES, STATE, GraphNode, TickJoin, node_main
+from ..names import SPIKES, STATE
+from .common import GraphNode, TickJoin, node_main
 
 
 class EncoderNode(GraphNode):

@@ -14,7 +14,8 @@ from clnn_ros_msgs.msg import Action, CartPoleState, TrialEvent
 from rosgraph_msgs.msg import Clock
 
 from ..core.physics import CONTINUE, FAILURE_REASONS, CartPole
-from .common import ACTION, CLOCK, STATE, TRIAL_EVENT, GraphNode, node_main
+from ..names import ACTION, CLOCK, STATE, TRIAL_EVENT
+from .common import GraphNode, node_main
 
 
 class EnvironmentNode(GraphNode):
@@ -59,7 +60,8 @@ class EnvironmentNode(GraphNode):
             if action.tick != self.over_tick:
                 self.refuse(ACTION, action, "force_direction 0 answers only the last state of a "
                                             "trial")
-            self.over_tick = None
+            else:
+                self.over_tick = None
         elif self.trial_over:
             self.refuse(ACTION, action, "the trial is over: no force applies")
         elif action.tick + 1 != self.tick:

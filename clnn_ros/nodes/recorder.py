@@ -2,17 +2,18 @@
 
     python -m clnn_ros.nodes.recorder --ros-args -p bag_path:=run.mcap [--params-file P]
 
-It subscribes raw (the CDR bytes, never decoded) to /clock, /trial/event, /cartpole/state,
-/rln/spikes, /rln/reward, /rln/action and /rln/weights with a deep reader queue, and announces
-"recorder" on /graph/ready once each subscription sees its publisher; run_all makes the trial
-manager wait for it (run setting extra_nodes), so the first tick is recorded. Every 20 ms it
-publishes on /recorder/progress the last tick it holds on every per-tick topic; the trial manager
-keeps the graph within RECORDER_WINDOW ticks of it, so a slow recorder loses nothing. The file is
-finished (rosbag2 metadata, summary, index) on EPISODE_END (a normal end, or a stall the trial
-manager detected), on Ctrl-C and on SIGTERM. Complete chunks are flushed as they fill, so a
-SIGKILL loses at most the open chunk. Parameters from --params-file (the run's) are stored in
-the bag's `clnn_ros` metadata record. Exit status 0, 130/143 after a signal, 2 if the bag
-cannot be written.
+It subscribes raw (the CDR bytes, never decoded) to clock, trial/event, cartpole/state,
+rln/spikes, rln/reward, rln/action and rln/weights (in its namespace) with a deep reader queue,
+and announces "recorder" on _graph/ready once each subscription sees its publisher; run_all
+makes the trial manager wait for it (run setting extra_nodes), so the first tick is recorded.
+Every 20 ms it publishes on _recorder/progress the last tick it holds on every per-tick topic;
+the trial manager keeps the graph within RECORDER_WINDOW ticks of it, so a slow recorder loses
+nothing. The file is finished (rosbag2 metadata, summary, index) on EPISODE_END (a normal end,
+or a stall the trial manager detected), on Ctrl-C, on SIGTERM and when run_all goes away.
+Complete chunks are flushed as they fill, so a SIGKILL loses at most the open chunk. A bag that
+holds no message is removed. The run's parameters are stored in the bag's `clnn_ros` metadata
+record. Exit status 0, 130/143 after a signal, 2 for bad parameters, 1 if the bag cannot be
+written (a full disk: one line).
 """
 
 from __future__ import annotations
@@ -24,10 +25,10 @@ import time
 from pathlib import Path
 
 from .. import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
-from ..rosenv import remove_unused_fast_dds_files
 
 from mcap.writer import CompressionType, Writer
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from rclpy.task import Future
@@ -36,11 +37,12 @@ from std_msgs.msg import String, UInt64
 from clnn_ros_msgs.msg import TrialEvent
 
 from .. import bag
-from .common import (PROGRESS_QOS, READY, READY_QOS, RECORDED, TRIAL_EVENT,
-                     Alive, ros_session, spin_until_finished)
+from ..core.params import ParamError, Params
+from ..files import describe_write_error
+from ..names import PER_TICK, READY, RECORDED, RECORDER, TRIAL_EVENT
+from .common import PROGRESS_QOS, READY_QOS, ros_session, spin_until_finished, steady_clock
+from .parameters import declare_parameters
 
-NAME = "recorder"
-PER_TICK = ("/clock", "/cartpole/state", "/rln/spikes", "/rln/reward", "/rln/action")
 # Deep enough that the DDS receive thread never drops a message while Python is busy (the
 # graph's publishers keep 2000): the recorder may lag behind the lockstep graph without loss.
 RECORD_QOS = QoSProfile(depth=100_000, reliability=ReliabilityPolicy.RELIABLE,
@@ -50,25 +52,31 @@ LINGER_MAX_S = 2.0
 
 
 class RecorderNode(Node):
-    def __init__(self, bag_path: str | None = None, context=None):
-        super().__init__(NAME, context=context,
-                         automatically_declare_parameters_from_overrides=True)
-        if bag_path is None:
-            bag_path = self.get_parameter("bag_path").value if self.has_parameter("bag_path") \
-                else ""
+    def __init__(self, overrides: dict | None = None, context=None, namespace=None,
+                 cli_args=None):
+        super().__init__(RECORDER, context=context, namespace=namespace, cli_args=cli_args,
+                         automatically_declare_parameters_from_overrides=True,
+                         parameter_overrides=[Parameter(k, value=v)
+                                              for k, v in (overrides or {}).items()])
+        params, settings = declare_parameters(
+            self, own={"bag_path": ("", "the MCAP file the recorder writes")})
+        bag_path = settings.pop("bag_path")
         if not bag_path:
-            raise ValueError("bag_path is not set (-p bag_path:=FILE.mcap)")
+            raise ParamError("bag_path is not set (-p bag_path:=FILE.mcap)")
         self.path = Path(bag_path)
+        self.failure = None  # why the bag could not be written (a full disk)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.file = open(self.path, "wb")
         # Every index type, message indexes included (rosbags finds no message without them).
         self.writer = Writer(self.file, chunk_size=bag.CHUNK_SIZE,
                              compression=CompressionType.ZSTD)
         self.writer.start(profile="ros2", library="clnn_ros recorder")
-        parameters = {name: p.value for name, p in self._parameters.items()
-                      if name not in ("bag_path", "use_sim_time", "start_type_description_service")}
-        self.writer.add_metadata("clnn_ros", {"parameters": json.dumps(parameters, sort_keys=True),
-                                              "bag_format": "clnn_ros.bag"})
+        defaults = Params().to_dict()
+        given = {k: list(v) if isinstance(v, tuple) else v
+                 for k, v in params.to_dict().items() if v != defaults[k]}
+        self.writer.add_metadata("clnn_ros", {
+            "parameters": json.dumps({**given, **settings}, sort_keys=True),
+            "namespace": self.get_namespace(), "bag_format": "clnn_ros.bag"})
         self.channels = {}     # topic -> channel id
         self.topics = []       # rosbag2 topic metadata
         self.counts = {topic: 0 for topic in bag.TOPIC_TYPES}
@@ -76,8 +84,7 @@ class RecorderNode(Node):
         self.last_tick = {}    # per-tick topic -> sim time of its last message
         self.missing = 0       # messages of per-tick topics that never arrived (gaps)
         self.subscriptions_by_topic = {}
-        tau = self.get_parameter("tau").value if self.has_parameter("tau") else 0.02
-        self.tau_ns = round(float(tau) * 1e9)
+        self.tau_ns = round(params.tau * 1e9)
         for topic, type_name in bag.TOPIC_TYPES.items():
             self.subscriptions_by_topic[topic] = self.create_subscription(
                 bag.message_class(type_name), topic, self._receiver(topic), RECORD_QOS, raw=True)
@@ -86,34 +93,42 @@ class RecorderNode(Node):
         self.last_message_at = time.monotonic()
         self._ready_publisher = self.create_publisher(String, READY, READY_QOS)
         self._progress_publisher = self.create_publisher(UInt64, RECORDED, PROGRESS_QOS)
-        self._alive = Alive(self, NAME)
         self._progress = UInt64()
-        self._timer = self.create_timer(0.02, self._poll)
+        self._timer = self.create_timer(0.02, self._poll, clock=steady_clock())
         self.closed = False
 
     def _channel(self, topic: str) -> int:
         channel = self.channels.get(topic)
         if channel is None:
             type_name = bag.TOPIC_TYPES[topic]
+            resolved = self.subscriptions_by_topic[topic].topic_name
             schema = self.writer.register_schema(name=type_name, encoding="ros2msg",
                                                  data=bag.schema_text(type_name).encode())
             qos = bag.qos_yaml([info.qos_profile
-                                for info in self.get_publishers_info_by_topic(topic)])
+                                for info in self.get_publishers_info_by_topic(resolved)])
             digest = bag.type_hash(type_name)
             channel = self.channels[topic] = self.writer.register_channel(
-                topic=topic, message_encoding="cdr", schema_id=schema,
+                topic=resolved, message_encoding="cdr", schema_id=schema,
                 metadata={"topic_type_hash": digest, "offered_qos_profiles": qos})
-            self.topics.append({"name": topic, "type": type_name, "qos": qos, "hash": digest})
+            self.topics.append({"name": resolved, "type": type_name, "qos": qos, "hash": digest,
+                                "topic": topic})
         return channel
 
     def _receiver(self, topic: str):
         def receive(data: bytes) -> None:
+            if self.failure:
+                return
             now = time.time_ns()
             self.last_message_at = time.monotonic()
-            channel = self.channels.get(topic) or self._channel(topic)
             stamp = bag.stamp_ns(data)
-            self.writer.add_message(channel_id=channel, log_time=now, data=data,
-                                    publish_time=stamp, sequence=self.counts[topic])
+            try:
+                channel = self.channels.get(topic) or self._channel(topic)
+                self.writer.add_message(channel_id=channel, log_time=now, data=data,
+                                        publish_time=stamp, sequence=self.counts[topic])
+            except OSError as error:  # the graph ends: a bag with holes would be lost silently
+                self.failure = describe_write_error(error, self.path)
+                self.finish(1)
+                return
             if topic in PER_TICK:
                 previous = self.last_tick.get(topic)
                 if previous is not None and stamp > previous and self.tau_ns:
@@ -133,9 +148,14 @@ class RecorderNode(Node):
         after EPISODE_END, finish when no message came for LINGER_S."""
         if self._ready_publisher is not None:
             if all(s.get_publisher_count() >= 1 for s in self.subscriptions_by_topic.values()):
-                for topic in bag.TOPIC_TYPES:
-                    self._channel(topic)
-                self._ready_publisher.publish(String(data=NAME))
+                try:
+                    for topic in bag.TOPIC_TYPES:
+                        self._channel(topic)
+                except OSError as error:
+                    self.failure = describe_write_error(error, self.path)
+                    self.finish(1)
+                    return
+                self._ready_publisher.publish(String(data=RECORDER))
                 self._ready_publisher = None
         if len(self.last_tick) == len(PER_TICK):  # sent each time: a lost one is replaced
             self._progress.data = min(self.last_tick.values()) // self.tau_ns
@@ -149,20 +169,33 @@ class RecorderNode(Node):
         if not self.finished.done():
             self.finished.set_result(code)
 
-    def close(self) -> None:
-        """Write the rosbag2 metadata record, the summary and the index (idempotent)."""
+    def close(self) -> str:
+        """Write the rosbag2 metadata record, the summary and the index (idempotent); a bag
+        that holds no message is removed. Returns what became of the bag, one line."""
         if self.closed:
-            return
+            return ""
         self.closed = True
-        for topic in bag.TOPIC_TYPES:
-            self._channel(topic)
-        start = self.first_ns or time.time_ns()
-        self.writer.add_metadata("rosbag2", {
-            "serialized_metadata": bag.rosbag2_metadata(self.path, self.topics, self.counts,
-                                                        start, self.last_ns or start),
-            "ROS_DISTRO": "jazzy"})
-        self.writer.finish()
-        self.file.close()
+        total = sum(self.counts.values())
+        try:
+            if not self.failure:
+                for topic in bag.TOPIC_TYPES:
+                    self._channel(topic)
+                start = self.first_ns or time.time_ns()
+                self.writer.add_metadata("rosbag2", {
+                    "serialized_metadata": bag.rosbag2_metadata(
+                        self.path, self.topics, self.counts, start, self.last_ns or start),
+                    "ROS_DISTRO": "jazzy"})
+                self.writer.finish()
+            self.file.close()
+        except OSError as error:
+            self.failure = self.failure or describe_write_error(error, self.path)
+        if total == 0:
+            self.path.unlink(missing_ok=True)
+            return f"nothing recorded: {self.path} removed"
+        if self.failure:
+            return f"{total} messages in {self.path}, not finalized ({self.failure}; " \
+                   f"--salvage reads its complete chunks)"
+        return f"{total} messages in {self.path} ({os.path.getsize(self.path) / 1e6:.2f} MB)"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -170,64 +203,27 @@ def main(argv: list[str] | None = None) -> int:
     with ros_session(argv) as signals:
         try:
             node = RecorderNode()
-        except (OSError, ValueError) as error:
+        except ParamError as error:
             print(f"recorder: error: {error}", file=sys.stderr)
             return 2
+        except OSError as error:
+            print(f"recorder: error: {describe_write_error(error)}", file=sys.stderr)
+            return 2
+        status = 1
         try:
             spin_until_finished([node], node.finished, signals)
-            return 128 + signals[0] if signals else node.finished.result()
+            status = 128 + signals[0] if signals else node.finished.result()
         finally:
-            node.close()
-            total = sum(node.counts.values())
-            print(f"recorder: {total} messages in {node.path} "
-                  f"({os.path.getsize(node.path) / 1e6:.2f} MB)", flush=True)
+            print(f"recorder: {node.close()}", flush=True)
+            if node.failure:
+                print(f"recorder: error: {node.failure}", file=sys.stderr, flush=True)
+                status = 1
             if node.missing:
                 print(f"recorder: warning: {node.missing} messages of per-tick topics never "
                       f"arrived (gaps in the ticks)", file=sys.stderr, flush=True)
             node.destroy_node()
+        return status
 
 
 if __name__ == "__main__":
     raise SystemExit(main())
-
-
-# --- used by run_all -------------------------------------------------------------------------
-
-def default_bag_path(out_dir: Path | None) -> Path:
-    """<out>/run.mcap with --out, else bags/run_<UTC time>.mcap under the current directory."""
-    if out_dir is not None:
-        return Path(out_dir) / "run.mcap"
-    return Path("bags") / time.strftime("run_%Y%m%d_%H%M%S.mcap", time.gmtime())
-
-
-def launch(values: dict, bag_path: Path, workdir: Path):
-    """Start the recorder process for a run_all run; OSError if the bag cannot be created."""
-    import subprocess
-    import yaml
-    bag_path = Path(bag_path).resolve()
-    bag_path.parent.mkdir(parents=True, exist_ok=True)
-    open(bag_path, "wb").close()
-    params_file = Path(workdir) / "recorder_params.yaml"
-    params_file.write_text(yaml.safe_dump({"/**": {"ros__parameters": {**values,
-                                                                       "bag_path": str(bag_path)}}}))
-    return subprocess.Popen([sys.executable, "-m", "clnn_ros.nodes.recorder", "--ros-args",
-                             "--params-file", str(params_file), "--log-level", "warn"])
-
-
-def stop(process, status: int, grace_s: float = 5.0) -> None:
-    """After the graph is done: the recorder ends by itself on EPISODE_END; after Ctrl-C, or if
-    no EPISODE_END came (the trial manager itself died), it is told to finish the file."""
-    import signal
-    import subprocess
-    if (status in (130, 143) or status < 0) and process.poll() is None:
-        process.send_signal(signal.SIGINT)
-    for sig, wait_s in ((None, grace_s), (signal.SIGTERM, 10.0), (signal.SIGKILL, 5.0)):
-        if sig is not None and process.poll() is None:
-            process.send_signal(sig)
-        try:
-            process.wait(timeout=wait_s)
-            if sig is not None:  # stopped from outside: its Fast DDS files may be left
-                remove_unused_fast_dds_files()
-            return
-        except subprocess.TimeoutExpired:
-            pass

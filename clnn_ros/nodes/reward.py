@@ -11,7 +11,8 @@ from clnn_ros_msgs.msg import CartPoleState, Reward
 
 from ..core.episode import start_from_setting
 from ..core.rln import NONE, ONE_HOT, REWARD_KINDS
-from .common import REWARD, STATE, GraphNode, TickJoin, node_main
+from ..names import REWARD, STATE
+from .common import GraphNode, TickJoin, node_main
 
 
 class RewardNode(GraphNode):

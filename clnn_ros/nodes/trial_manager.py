@@ -5,59 +5,85 @@ trials, ends the episode, reports progress, and detects a stalled graph.
     python -m clnn_ros.nodes.trial_manager --ros-args -p seed:=1 -p trials:=32 -p out_dir:=out
 
 Tick t is done when it holds the environment's state(t) and the agent's action(t); then it
-publishes /clock(t+1), preceded by END/START (or EPISODE_END) events when the trial is over.
-When no tick completes for `stall_timeout_s`, it names the first node of the tick's chain whose
-message is missing, ends the episode and exits with status 1. A node whose process dies (its
-heartbeats stop for a second while the graph stands still) ends the episode the same way, named
-at once. With a recorder it keeps the clock at most RECORDER_WINDOW ticks ahead
-of the recorder's progress, so that no message is lost to a slow recorder.
+publishes clock(t+1), preceded by END/START (or EPISODE_END) events when the trial is over.
+
+What ends an episode early, with exit status 1 and the node to blame:
+* a stall: no tick completes for `stall_timeout_s` of the trial manager's own running time (a
+  trial manager that was itself paused or starved does not count the pause); the node named is
+  the first of the tick's chain whose message for the tick is missing;
+* a node of the graph that leaves the ROS graph (its process exited);
+* before the first tick: another graph of the same node names in the same namespace and domain,
+  or a node of `external_nodes` that does not appear within `stall_timeout_s` once the rest of
+  the graph is ready. Nodes that run_all started are waited for as long as they take: run_all
+  sees a process that dies.
+With a recorder it keeps the clock at most RECORDER_WINDOW ticks ahead of the recorder's
+progress, so that no message is lost to a slow recorder. Results go to out_dir as each trial
+ends (trials.csv; written to a temporary file, then renamed: a full disk keeps the last whole
+file) and at the end (final_weights.npy, summary.json).
 """
 
 from __future__ import annotations
 
 import csv
+import io
 import json
+import os
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
 from clnn_ros_msgs.msg import Action, CartPoleState, Reward, SpikeVector, TrialEvent, WeightSnapshot
 from rosgraph_msgs.msg import Clock
-from std_msgs.msg import Empty, String, UInt64
+from std_msgs.msg import String, UInt64
 
 from ..core.episode import seed_setup, start_from_setting
-from .common import (ACTION, ALIVE, ALIVE_QOS, ALIVE_TIMEOUT_S, CLOCK, GRAPH_NODES,
-                     PROGRESS_QOS, READY, READY_QOS, RECORDED, RECORDER_WINDOW, REWARD, SPIKES,
-                     STATE, TRIAL_EVENT, WEIGHTS, GraphNode, TickJoin, node_main)
+from ..files import describe_write_error, write_atomically, write_text_atomically
+from ..names import (ACTION, CLOCK, GRAPH_NODES, PUBLISHED_BY, READY, RECORDED, RECORDER, REWARD,
+                     SPIKES, STATE, TRIAL_EVENT, TRIAL_MANAGER, WEIGHTS)
+from .common import (PROGRESS_QOS, READY_QOS, RECORDER_WINDOW, GraphNode, TickJoin, node_main,
+                     steady_clock)
+from .parameters import names_list
 
-STARTUP_TIMEOUT_S = 60.0  # process start, imports and discovery of the whole graph
-CONFIRM_S = 0.3  # a node without heartbeats is dead once the graph has stopped for this long
+WATCHDOG_S = 0.1
+GRAPH_CHECK_S = 0.5  # how often the ROS graph is looked at for nodes that left it
+DISCOVERY_S = 1.0  # the least time before the first tick: another graph is discovered by then
+WAITING_NOTE_S = 10.0  # while the graph is not ready, a note of what it waits for this often
 # Who publishes what within a tick, in causal order: the first one missing went silent.
-CHAIN = ((STATE, "environment"), (SPIKES, "encoder"), (REWARD, "reward"), (ACTION, "agent"))
+CHAIN = (STATE, SPIKES, REWARD, ACTION)
 
 
 class TrialManagerNode(GraphNode):
     listens_to_trial_events = False
+    driven_by_clock = False  # it publishes the clock
 
     def __init__(self, **options):
-        # /clock: environment; /trial/event: environment, encoder, reward, agent
-        super().__init__("trial_manager", {"clock_pub": (Clock, CLOCK, 1),
-                                           "event_pub": (TrialEvent, TRIAL_EVENT, 4)}, **options)
+        # clock: environment; trial/event: environment, encoder, reward, agent
+        super().__init__(TRIAL_MANAGER, {"clock_pub": (Clock, CLOCK, 1),
+                                         "event_pub": (TrialEvent, TRIAL_EVENT, 4)}, **options)
         _, self.angles = seed_setup(self.settings["seed"], self.params)
         self.results = []  # (trial, initial angle, steps, end reason)
         self.clock_msg = Clock()
         self.final_weights = None
         self.weights_tick = None
+        self.trial_end_tick = None  # the last tick of the last trial that ended
         self.last_trial_tick = None  # set when the last trial is over
         # a resumed episode (init_weights: a checkpoint) starts at the checkpoint's next trial
         self.trial = start_from_setting(self.settings["seed"], self.params,
                                         self.settings["init_weights"])[2]
+        self.created_at = time.monotonic()
         self.started_at = None
         self.ready = set()
-        self.last_tick = {topic: -1 for topic, _ in CHAIN}
-        self.last_progress = time.monotonic()
+        self.external_nodes = names_list(self.settings["external_nodes"])
+        self.expected = set(GRAPH_NODES) | self.extra_nodes
+        self.in_graph = set()  # nodes of the graph seen in the ROS graph
+        self.externals_awaited_since = None
+        self.last_note = self.last_graph_check = self.last_check = time.monotonic()
+        self.stalled_s = 0.0  # running time of this node without progress
         self.exit_reason = ""
         self.join = TickJoin(self, (STATE, ACTION), self.on_tick)
+        self.current = {topic: -1 for topic in CHAIN}  # the last tick each topic gave
+        self.last_refused = {}  # topic: what was refused last on it
         self.subscribe(CartPoleState, STATE, self.seen(STATE))
         self.subscribe(SpikeVector, SPIKES, self.seen(SPIKES))
         self.subscribe(Reward, REWARD, self.seen(REWARD))
@@ -66,48 +92,36 @@ class TrialManagerNode(GraphNode):
         self.create_subscription(String, READY, self.on_ready, READY_QOS)
         self.recorded_tick = -1
         self.held = None  # (tick, starts a trial): the next tick, waiting for the recorder
-        self.follows_recorder = "recorder" in self.extra_nodes
+        self.follows_recorder = RECORDER in self.extra_nodes
         if self.follows_recorder:
             self.create_subscription(UInt64, RECORDED, self.on_recorded, PROGRESS_QOS)
-        self.heard = {}  # node: when its last heartbeat came
-        self.watched = (*GRAPH_NODES, *sorted(self.extra_nodes))
-        for node in self.watched:
-            self.create_subscription(Empty, ALIVE + node, self.heartbeat_of(node), ALIVE_QOS)
-        self.watchdog = self.create_timer(0.1, self.check)
+        self.watchdog = self.create_timer(WATCHDOG_S, self.check, clock=steady_clock())
 
     def seen(self, topic: str):
+        """State and action make the tick (TickJoin); spikes and reward, watched for the blame,
+        must come in order, one per tick (each may arrive after the tick's action)."""
         def receive(msg) -> None:
-            self.last_tick[topic] = max(self.last_tick[topic], msg.tick)
             if topic in (STATE, ACTION):
-                self.join.offer(topic, msg)
+                accepted = self.join.offer(topic, msg)
+            elif msg.tick != self.current[topic] + 1 or msg.tick > self.join.tick:
+                self.refuse(topic, msg, f"expected tick {self.current[topic] + 1}")
+                accepted = False
+            else:
+                accepted = True
+            if accepted:
+                self.current[topic] = msg.tick
         return receive
+
+    def refuse(self, topic: str, msg, reason: str, kind: str = "tick") -> None:
+        super().refuse(topic, msg, reason, kind)
+        self.last_refused[topic] = f"tick {getattr(msg, 'tick', '?')}: {reason}"
 
     def on_ready(self, msg: String) -> None:
         self.ready.add(msg.data)
 
-    def heartbeat_of(self, node: str):
-        def heard(_) -> None:
-            self.heard[node] = time.monotonic()
-        return heard
-
-    def watching_all(self) -> bool:
-        """Has each node with a heartbeat publisher (every node of this package; a swapped-in
-        environment node may have none, and is then caught by the stall watchdog alone) been
-        heard, so that its death can be told from tick 0 on?"""
-        return all(node in self.heard for node in self.watched
-                   if self.count_publishers(ALIVE + node))
-
-    def dead_node(self, now: float) -> str | None:
-        """A node whose heartbeats stopped ALIVE_TIMEOUT_S ago while the graph made no progress
-        for CONFIRM_S (on a machine too loaded to beat in time, the graph still ticks)."""
-        if now - self.last_progress < CONFIRM_S:
-            return None
-        return next((node for node, heard in self.heard.items()
-                     if now - heard > ALIVE_TIMEOUT_S), None)
-
     def on_recorded(self, msg: UInt64) -> None:
         if msg.data > self.recorded_tick and self.held is not None:
-            self.last_progress = time.monotonic()  # a slow recorder is not a stalled one
+            self.stalled_s = 0.0  # a slow recorder is not a stalled one
         self.recorded_tick = max(self.recorded_tick, msg.data)
         if self.held is not None and self.held[0] <= self.recorded_tick + RECORDER_WINDOW:
             tick, starts_trial = self.held
@@ -115,6 +129,12 @@ class TrialManagerNode(GraphNode):
             self.advance(tick, starts_trial)
 
     def on_weights(self, msg: WeightSnapshot) -> None:
+        """The weights after a trial: of the tick being completed (they may come before its
+        action) or of the trial's last tick, once."""
+        if msg.tick != self.join.tick and (msg.tick != self.trial_end_tick or
+                                           self.weights_tick == msg.tick):
+            self.refuse(WEIGHTS, msg, f"expected the weights after tick {self.trial_end_tick}")
+            return
         self.final_weights = np.array(msg.weights).reshape(msg.neurons, msg.segments, msg.inputs)
         self.weights_tick = msg.tick
         self.finish_when_weights_arrive()
@@ -125,28 +145,80 @@ class TrialManagerNode(GraphNode):
         if self.last_trial_tick is not None and self.weights_tick == self.last_trial_tick:
             self.stop(0, "completed", self.last_trial_tick)
 
+    # --- the watchdog -------------------------------------------------------------------------
+
     def check(self) -> None:
-        """Start once every node is ready; afterwards watch for a stall."""
+        """Start once the graph is ready; afterwards watch for a stall and for nodes leaving."""
         now = time.monotonic()
+        # Only the time this timer ran on schedule counts: a pause of this process (SIGSTOP, a
+        # starved CPU) is not the graph's stall.
+        running = min(now - self.last_check, 2 * WATCHDOG_S)
+        self.last_check = now
+        if now - self.last_graph_check >= GRAPH_CHECK_S:
+            self.last_graph_check = now
+            if problem := self.graph_problem():
+                self.stop(1, problem)
+                return
         if self.started_at is None:
-            if self.publishers_matched() and self.ready >= set(GRAPH_NODES) | self.extra_nodes \
-                    and self.watching_all():
-                self.started_at = self.last_progress = now
+            self.check_start(now, running)
+            return
+        self.stalled_s += running
+        if self.stalled_s > self.settings["stall_timeout_s"]:
+            self.stop(1, self.stall_reason())
+
+    def graph_problem(self) -> str | None:
+        """Another graph of the same names before the start; a node that left the ROS graph."""
+        namespace = self.get_namespace()
+        present = Counter(name for name, ns in self.get_node_names_and_namespaces()
+                          if ns == namespace)
+        if self.started_at is None:
+            twice = sorted(n for n in self.expected | {TRIAL_MANAGER} if present[n] > 1)
+            if twice:
+                return (f"another graph runs in namespace {namespace} on ROS domain "
+                        f"{os.environ.get('ROS_DOMAIN_ID', '0') or '0'}: two nodes named "
+                        f"{', '.join(twice)} (give each graph its own --namespace or "
+                        f"ROS_DOMAIN_ID)")
+        self.in_graph |= {n for n in self.expected if present[n]}
+        left = sorted(n for n in self.in_graph if not present[n])
+        if left:
+            return f"node '{left[0]}' left the ROS graph at tick {self.join.tick}"
+        return None
+
+    def check_start(self, now: float, running: float) -> None:
+        missing = self.expected - self.ready
+        if not missing and self.publishers_matched():
+            if now - self.created_at >= DISCOVERY_S:
+                self.started_at = now
                 self.advance(0, starts_trial=True)
-            elif now - self.last_progress > STARTUP_TIMEOUT_S:
-                missing = sorted((set(GRAPH_NODES) | self.extra_nodes) - self.ready) or [
-                    "(subscriptions of /clock or /trial/event)"]
-                self.stop(1, f"graph not ready after {STARTUP_TIMEOUT_S:.0f} s: "
-                             f"waiting for {', '.join(missing)}")
-        elif dead := self.dead_node(now):
-            self.stop(1, f"node '{dead}' died at tick {self.join.tick} (no heartbeat for "
-                         f"{ALIVE_TIMEOUT_S:g} s)")
-        elif now - self.last_progress > self.settings["stall_timeout_s"]:
-            silent = "recorder" if self.held is not None else next(
-                (node for topic, node in CHAIN if self.last_tick[topic] < self.join.tick),
-                "agent")  # all of the tick is in: only the final weights are missing
-            self.stop(1, f"stall: node '{silent}' went silent at tick {self.join.tick} "
-                         f"(no progress for {self.settings['stall_timeout_s']:g} s)")
+            return
+        if missing and missing <= self.external_nodes and \
+                not (self.expected - self.external_nodes) - self.ready:
+            # Everything run_all started is ready: the nodes started by someone else get the
+            # stall timeout to appear.
+            self.externals_awaited_since = (self.externals_awaited_since or 0.0) + running
+            if self.externals_awaited_since > self.settings["stall_timeout_s"]:
+                self.stop(1, f"no {', '.join(sorted(missing))} node appeared in namespace "
+                             f"{self.get_namespace()} within {self.settings['stall_timeout_s']:g}"
+                             f" s (start it yourself: docs/ENV_CONTRACT.md)")
+        elif now - self.last_note >= WAITING_NOTE_S:
+            self.last_note = now
+            self.get_logger().warning(f"waiting for {', '.join(sorted(missing)) or 'matching'}")
+
+    def stall_reason(self) -> str:
+        """The node whose message for the current tick is missing, first in the chain."""
+        tick, timeout = self.join.tick, self.settings["stall_timeout_s"]
+        if self.held is not None:
+            return f"stall: node '{RECORDER}' fell behind at tick {self.recorded_tick} " \
+                   f"(no progress for {timeout:g} s)"
+        topic = next((t for t in CHAIN if self.current[t] < tick), None)
+        if topic is None:  # all of the tick is in: only the final weights are missing
+            topic = WEIGHTS
+        refused = f"; last refused {topic}: {self.last_refused[topic]}" \
+            if topic in self.last_refused else ""
+        return f"stall: node '{PUBLISHED_BY[topic]}' went silent at tick {tick} (no " \
+               f"progress for {timeout:g} s{refused})"
+
+    # --- the clock ----------------------------------------------------------------------------
 
     def advance(self, tick: int, starts_trial: bool) -> None:
         """Publish tick `tick` (START first if it starts a trial), unless the recorder is more
@@ -167,12 +239,13 @@ class TrialManagerNode(GraphNode):
 
     def on_tick(self, inbox: dict) -> None:
         state, action = inbox[STATE], inbox[ACTION]
-        self.last_progress = time.monotonic()
+        self.stalled_s = 0.0
         tick = state.tick
         if action.force_direction != 0:
             self.advance(tick + 1, starts_trial=False)
             return
         reason = state.failure_reason or "max_steps"
+        self.trial_end_tick = tick
         self.results.append((self.trial, float(self.angles[self.trial]), state.successful_steps,
                              reason))
         self.event_pub.publish(self.stamp(TrialEvent(
@@ -180,7 +253,9 @@ class TrialManagerNode(GraphNode):
             successful_steps=state.successful_steps, end_reason=reason,
             seed=self.settings["seed"]), tick, self.trial))
         self.report(tick)
-        if self.trial + 1 < len(self.angles):
+        if problem := self.save(self.write_trials):
+            self.stop(1, problem, tick)
+        elif self.trial + 1 < len(self.angles):
             self.trial += 1
             self.advance(tick + 1, starts_trial=True)
         else:
@@ -195,39 +270,58 @@ class TrialManagerNode(GraphNode):
         print(f"trial {self.trial + 1:4d}/{len(self.angles)}  steps {steps[-1]:6d}  "
               f"mean {np.mean(steps):8.1f}  {rate:7.0f} ticks/s", flush=True)
 
+    # --- the end ------------------------------------------------------------------------------
+
     def interrupted(self) -> None:
         """Ctrl-C: keep what the run did so far."""
         self.exit_reason = "interrupted"
-        self.write_results(self.join.tick)
+        self.save(self.write_results, self.join.tick)
 
     def stop(self, exit_code: int, reason: str, tick: int | None = None) -> None:
         """End the episode: tell every node, write the results, finish with `exit_code`."""
         if self.finished.done():
             return
-        self.exit_reason = reason
         tick = self.join.tick if tick is None else tick
         self.event_pub.publish(self.stamp(TrialEvent(
             event=TrialEvent.EPISODE_END, end_reason=reason, seed=self.settings["seed"],
             successful_steps=self.results[-1][2] if self.results else 0), tick, self.trial))
+        self.exit_reason = reason
+        if (problem := self.save(self.write_results, tick)) and not exit_code:
+            exit_code, reason = 1, problem
+            self.exit_reason = reason
         if exit_code:
             self.get_logger().error(reason)
-        self.write_results(tick)
         self.finish(exit_code)
 
-    def write_results(self, tick: int) -> None:
+    def save(self, write, *args) -> str | None:
+        """Run a writer of out_dir's files; the one-line problem if a file cannot be written
+        (the files written before stay whole)."""
         if not self.settings["out_dir"]:
-            return
-        out = Path(self.settings["out_dir"])
-        out.mkdir(parents=True, exist_ok=True)
-        with open(out / "trials.csv", "w", newline="") as f:
-            writer = csv.writer(f)
-            writer.writerow(["seed", "trial", "initial_angle_deg", "steps", "end_reason"])
-            writer.writerows([self.settings["seed"], *r] for r in self.results)
+            return None
+        try:
+            write(Path(self.settings["out_dir"]), *args)
+        except OSError as error:
+            self.get_logger().error(describe_write_error(error))
+            return describe_write_error(error)
+        return None
+
+    def write_trials(self, out: Path) -> None:
+        text = io.StringIO()
+        writer = csv.writer(text)
+        writer.writerow(["seed", "trial", "initial_angle_deg", "steps", "end_reason"])
+        writer.writerows([self.settings["seed"], *r] for r in self.results)
+        write_text_atomically(out / "trials.csv", text.getvalue())
+
+    def write_results(self, out: Path, tick: int) -> None:
+        self.write_trials(out)
         if self.final_weights is not None:
-            np.save(out / "final_weights.npy", self.final_weights)
+            def save_weights(temporary: Path) -> None:
+                with open(temporary, "wb") as f:
+                    np.save(f, self.final_weights)
+            write_atomically(out / "final_weights.npy", save_weights)
         wall = time.monotonic() - self.started_at if self.started_at else 0.0
         steps = [r[2] for r in self.results]
-        (out / "summary.json").write_text(json.dumps({
+        write_text_atomically(out / "summary.json", json.dumps({
             "seed": self.settings["seed"], "trials": len(steps),
             "mean_steps": float(np.mean(steps)) if steps else None, "ticks": tick + 1,
             "wall_s": wall, "ticks_per_s": (tick + 1) / wall if wall else None,

@@ -1,0 +1,171 @@
+"""The graph's parameters as ROS parameters: each declared with a ParameterDescriptor (a
+description, its range or choices, read-only: every one is read once at start), so that
+`ros2 param describe` shows the constraints and `ros2 param set` is refused with a reason.
+
+Every node of the graph takes every parameter (one params file for the whole graph): the model's
+(core Params) and the run settings (RUN_SETTINGS). A name that is neither is an error."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import yaml
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.node import Node
+
+from ..names import RUN_SETTINGS
+from ..core.params import (E_FLAGS, INTEGRATORS, PHYSICS, SUCCESS_COUNTER, TAGGING, TIE_BREAKS,
+                           ParamError, Params, params_from_strings)
+
+# Parameters rclpy itself declares.
+ROS_BUILTIN_PARAMETERS = {"use_sim_time", "start_type_description_service"}
+
+COUNT = (1, 2**31 - 1)  # counts travel in the messages' uint32 fields
+POSITIVE = (0.0, sys.float_info.max)  # > 0 (Params refuses 0)
+NON_NEGATIVE = (0.0, sys.float_info.max)
+# name: (description, (lowest, highest) or choices)
+DESCRIPTIONS = {
+    "nsv": ("state variables encoded: 1 = pole angle, 2 = angle and cart velocity", (1, 2)),
+    "segments": ("dendritic segments per neuron; 0 = the paper's (3 for 1 SV, 9 for 2 SV)",
+                 (0, 64)),
+    "sigma": ("success window: a positive reward every sigma successful steps", COUNT),
+    "omega": ("punishment window: length of the action path punished on a failure", COUNT),
+    "rho_plus": ("maximum reward capture (synapses whose e flag is 1)", NON_NEGATIVE),
+    "rho_minus": ("maximum reward backoff (synapses whose e flag is 0)", NON_NEGATIVE),
+    "punish": ("pi: maximum punishment decrement", NON_NEGATIVE),
+    "w_max": ("largest synaptic weight", POSITIVE),
+    "w_base": ("initial weights: w_base + uniform [0, w_range)", NON_NEGATIVE),
+    "w_range": ("initial weights: w_base + uniform [0, w_range)", NON_NEGATIVE),
+    "trials": ("trials of the episode", COUNT),
+    "max_steps": ("successful steps that end a trial", COUNT),
+    "n_angles": ("initial angles, evenly spaced over +-angle_span_deg", COUNT),
+    "angle_span_deg": ("initial angles span +-this, deg", NON_NEGATIVE),
+    "angle_edges_deg": ("encoder: interior edges of the pole-angle intervals, deg (Table 1)",
+                        None),
+    "velocity_edge": ("encoder, 2 SV: |cart velocity| edge between its 3 intervals, m/s",
+                      POSITIVE),
+    "physics": ("cart-pole equations: paper (its units slip) or correct", PHYSICS),
+    "integrator": ("physics integration", INTEGRATORS),
+    "cart_mass": ("kg", POSITIVE), "pole_mass": ("kg", POSITIVE),
+    "pole_length": ("half the pole's length, m", POSITIVE), "gravity": ("m/s^2", POSITIVE),
+    "force": ("magnitude of the force on the cart, N", NON_NEGATIVE),
+    "tau": ("one tick: the physics step, s of sim time", POSITIVE),
+    "angle_limit_deg": ("a trial fails beyond this pole angle, deg (at most 12)", (0.0, 12.0)),
+    "track_limit_m": ("a trial fails beyond this cart position, m", POSITIVE),
+    "tie_break": ("winner-take-all ties", TIE_BREAKS),
+    "tagging": ("which segments are tagged for learning", TAGGING),
+    "e_flag": ("e flag latched at tagging or read at reward time", E_FLAGS),
+    "success_counter": ("success counter reset each trial or carried", SUCCESS_COUNTER),
+    "seed": ("the episode's seed: initial weights, initial angles", (0, 2**32 - 1)),
+    "stall_timeout_s": ("seconds without progress before the graph is declared stalled",
+                        POSITIVE),
+    "out_dir": ("where trials.csv, summary.json, checkpoints go ('' none)", None),
+    "progress": ("print a line per trial", None),
+    "extra_nodes": ("comma-separated participants that subscribe to every topic and announce "
+                    "readiness (the recorder): the graph waits for them", None),
+    "external_nodes": ("comma-separated graph nodes started by someone else (an environment "
+                       "on a robot): waited for at most stall_timeout_s once the rest is ready",
+                       None),
+    "init_weights": ("'' the seed's; fig7, fig12, a weights .npy, or a checkpoint .npz to "
+                     "resume", None),
+}
+
+
+def descriptor(name: str, description: str | None = None) -> ParameterDescriptor:
+    """Read-only, with its description and constraints."""
+    text, constraint = DESCRIPTIONS.get(name, (description or "", None))
+    result = ParameterDescriptor(name=name, description=text, read_only=True)
+    if constraint and isinstance(constraint[0], str):
+        result.additional_constraints = "one of: " + ", ".join(constraint)
+    elif constraint and isinstance(constraint[0], int):
+        result.integer_range = [IntegerRange(from_value=constraint[0], to_value=constraint[1],
+                                             step=1)]
+    elif constraint:
+        result.floating_point_range = [FloatingPointRange(from_value=constraint[0],
+                                                          to_value=constraint[1])]
+    return result
+
+
+def declare_parameters(node: Node, own: dict[str, tuple] | None = None) -> tuple[Params, dict]:
+    """Every parameter given to the node (command line, --params-file or in-process overrides),
+    validated: model parameters become a core Params, the rest the run settings (and the node's
+    `own`: {name: (default, description)}); an unknown name is a ParamError. Then all of them
+    are declared with their descriptors and values, so all are listed."""
+    given = {name: p.value for name, p in node.get_parameters_by_prefix("").items()
+             if name not in ROS_BUILTIN_PARAMETERS}
+    for name in given:  # declared from the overrides, without descriptors: declared again below
+        node.undeclare_parameter(name)
+    settings = dict(RUN_SETTINGS)
+    for name in set(given) & set(settings):
+        settings[name] = convert_setting(name, given.pop(name))
+    for name, (default, _) in (own or {}).items():
+        settings[name] = given.pop(name, default)
+    if given.get("segments") == 0:
+        given.pop("segments")  # 0 stands for the paper's default (ROS has no null parameter)
+    params = params_from_strings(given)
+    descriptions = {name: description for name, (_, description) in (own or {}).items()}
+    for name, value in {**params.to_dict(), **settings}.items():
+        value = 0 if value is None else list(value) if isinstance(value, tuple) else value
+        node.declare_parameter(name, value, descriptor(name, descriptions.get(name)),
+                               ignore_override=True)
+    return params, settings
+
+
+def read_params_file(path) -> dict:
+    """The parameters of a ROS 2 parameters YAML (`<node>: {ros__parameters: {...}}`, every
+    node's section merged), or one ParamError line: rcl itself takes some bad files silently
+    (a file without any `ros__parameters` section) and refuses others with a traceback. The
+    graph's nodes share their parameters, so two sections must not give a name two values."""
+    try:
+        document = yaml.safe_load(Path(path).read_text())
+    except (OSError, UnicodeDecodeError) as error:
+        raise ParamError(f"cannot read params file {path}: {error}") from None
+    except yaml.YAMLError as error:
+        mark = getattr(error, "problem_mark", None)
+        where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark else ""
+        raise ParamError(f"params file {path} is not valid YAML: "
+                         f"{getattr(error, 'problem', None) or error}{where}") from None
+    sections = {node: v.get("ros__parameters") for node, v in document.items()
+                if isinstance(v, dict)} if isinstance(document, dict) else {}
+    if not sections or not all(isinstance(s, dict) for s in sections.values()):
+        raise ParamError(f"params file {path} must map node names to 'ros__parameters:' "
+                         f"mappings, e.g. '/**: {{ros__parameters: {{sigma: 256}}}}'")
+    merged, given_by = {}, {}
+    for node, section in sections.items():
+        for name, value in section.items():
+            if name in merged and merged[name] != value:
+                raise ParamError(f"params file {path} gives {name} two values ({merged[name]!r} "
+                                 f"for {given_by[name]}, {value!r} for {node}); the graph's "
+                                 f"nodes share their parameters")
+            merged[name], given_by[name] = value, node
+    return merged
+
+
+def convert_setting(name: str, value):
+    """A run setting (RUN_SETTINGS) from the command line, a ROS parameter or YAML, checked:
+    its default's type (text of a number counts as the number), else one ParamError line."""
+    default = RUN_SETTINGS[name]
+    if isinstance(default, (bool, str)):
+        if type(value) is not type(default):
+            expected = "true or false" if isinstance(default, bool) else "text"
+            raise ParamError(f"{name} must be {expected}, got {value!r}")
+        return value
+    if isinstance(value, str):
+        try:
+            value = int(value, 10) if isinstance(default, int) else float(value)
+        except ValueError:
+            pass  # refused below with the text itself
+    if isinstance(default, int):  # the seed: TrialEvent.seed is a uint32
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 2**32:
+            raise ParamError(f"{name} must be an integer from 0 to 2**32-1, got {value!r}")
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+            not 0 < value < float("inf"):
+        raise ParamError(f"{name} must be a finite number > 0, got {value!r}")
+    return float(value)
+
+
+def names_list(setting: str) -> set[str]:
+    """The names of a comma-separated setting (extra_nodes, external_nodes)."""
+    return {name.strip() for name in setting.split(",") if name.strip()}

@@ -1,0 +1,146 @@
+"""run_all's processes: started, watched and stopped by their owner, so that a child that
+exits is known at once (its exit status or signal and the last lines of its stderr), never
+guessed from silence; and the children end when run_all ends, even killed with SIGKILL.
+
+Each child gets a pipe on stdin that run_all never writes to (a node sees its end of file when
+run_all is gone: nodes.common.EXIT_WITH_STDIN) and its stderr is read by a thread that passes
+each line on to run_all's stderr and keeps the last ones. The Fast DDS shared-memory files the
+children use are noted while they run, and removed after the end if no process uses them then
+(a killed process cannot remove its own): those of this run's processes, never another's.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections import deque
+
+from .rosenv import remove_unused_fast_dds_files, shm_files_of
+
+TAIL_LINES = 5
+SAMPLE_S = 0.5  # how often the children's shared-memory files are noted
+# "<prog>: error: <message>" (the project's one-line errors) or a ROS log line at ERROR.
+OWN_ERROR = re.compile(r"^(?:\S+: error: |\[ERROR\] \[[\d.]+\] \[[^\]]+\]: )(.*)$")
+
+
+class Child:
+    """One process of the run."""
+
+    def __init__(self, name: str, command: list[str], env: dict):
+        self.name = name
+        self.tail = deque(maxlen=TAIL_LINES)
+        self.process = subprocess.Popen(command, stdin=subprocess.PIPE, stderr=subprocess.PIPE,
+                                        env=env)
+        self._reader = threading.Thread(target=self._pass_stderr, daemon=True,
+                                        name=f"stderr-{name}")
+        self._reader.start()
+
+    def _pass_stderr(self) -> None:
+        for line in iter(self.process.stderr.readline, b""):
+            text = line.decode(errors="replace").rstrip("\n")
+            self.tail.append(text)
+            try:
+                print(text, file=sys.stderr, flush=True)
+            except (OSError, ValueError):
+                pass  # run_all's own stderr is gone: keep draining the child's
+
+    @property
+    def returncode(self) -> int | None:
+        return self.process.poll()
+
+    def describe_exit(self) -> str:
+        """'node 'x' exited with status 3' / 'died (SIGKILL)', or the child's own last error
+        line first ('disk full writing F (node 'recorder' exited with status 1)')."""
+        self._reader.join(timeout=1.0)  # its last lines
+        code = self.process.returncode
+        how = f"exited with status {code}" if code >= 0 else \
+            f"died ({signal.Signals(-code).name})"
+        own = next((m.group(1) for m in map(OWN_ERROR.match, reversed(self.tail)) if m), None)
+        return f"{own} (node '{self.name}' {how})" if own else f"node '{self.name}' {how}"
+
+    def last_lines(self) -> list[str]:
+        return list(self.tail)
+
+    def signal(self, signum: int) -> None:
+        if self.process.poll() is None:
+            self.process.send_signal(signum)
+
+    def wait(self, timeout: float) -> bool:
+        try:
+            self.process.wait(timeout=max(0.0, timeout))
+            return True
+        except subprocess.TimeoutExpired:
+            return False
+
+    def close(self) -> None:
+        self._reader.join(timeout=1.0)
+        for stream in (self.process.stdin, self.process.stderr):
+            try:
+                stream.close()
+            except OSError:
+                pass
+
+
+class Supervisor:
+    """The children of one run and the shared-memory files they used."""
+
+    def __init__(self):
+        self.children: dict[str, Child] = {}
+        self.shm_files: set[str] = set()
+        self._stop_sampling = threading.Event()
+        self._sampler = threading.Thread(target=self._sample, daemon=True, name="shm-sampler")
+        self._sampler.start()
+
+    def start(self, name: str, command: list[str], env: dict) -> Child:
+        self.children[name] = child = Child(name, command, env)
+        return child
+
+    def _pids(self) -> list[int]:
+        return [os.getpid()] + [c.process.pid for c in self.children.values()
+                                if c.process.poll() is None]
+
+    def _sample(self) -> None:
+        while not self._stop_sampling.wait(SAMPLE_S):
+            self.note_shm_files()
+
+    def note_shm_files(self) -> None:
+        for pid in self._pids():
+            self.shm_files |= shm_files_of(pid)
+
+    def first_failure(self, exclude: set[str]) -> Child | None:
+        """A child (not in `exclude`) that exited with a non-zero status or a signal."""
+        return next((c for name, c in self.children.items() if name not in exclude
+                     and c.returncode not in (None, 0)), None)
+
+    def stop(self, names: list[str], grace_s: float, interrupt: bool) -> list[str]:
+        """Stop these children: SIGINT first if `interrupt`, else they get `grace_s` to exit
+        by themselves; then SIGTERM, then SIGKILL. Returns the names it had to terminate."""
+        chosen = [self.children[n] for n in names if n in self.children]
+        if interrupt:
+            for child in chosen:
+                child.signal(signal.SIGINT)
+        deadline = time.monotonic() + grace_s
+        forced = []
+        for child in chosen:
+            if child.wait(deadline - time.monotonic()):
+                continue
+            forced.append(child.name)
+            child.signal(signal.SIGTERM)
+            if not child.wait(2.0):
+                child.signal(signal.SIGKILL)
+                child.wait(5.0)
+        return forced
+
+    def close(self) -> list[str]:
+        """After every child ended: remove the run's Fast DDS files that no process uses.
+        Returns the problems (files that could not be removed), one line each."""
+        self._stop_sampling.set()
+        self._sampler.join(timeout=2.0)
+        for child in self.children.values():
+            child.close()
+        return remove_unused_fast_dds_files(self.shm_files)
