@@ -1,9 +1,13 @@
-"""Environment defaults for every process the project starts, applied before rclpy loads:
-DDS discovery stays on the loopback interface unless the user chose otherwise."""
+"""Environment defaults for every process the project starts, applied before rclpy loads (a
+user's own setting wins): DDS discovery stays on the loopback interface, and Fast DDS takes
+the project's profile (fastdds_profile.xml: a shared-memory port outlives a paused process)."""
 
 import os
+from pathlib import Path
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE",
+                      str(Path(__file__).with_name("fastdds_profile.xml")))
 
 
 SHM = "/dev/shm"
@@ -11,7 +15,10 @@ SHM = "/dev/shm"
 
 def fast_dds_shm_files() -> set[str]:
     """Names of Fast DDS shared-memory files (segments, port queues, their locks)."""
-    return {name for name in os.listdir(SHM) if "fastrtps_" in name}
+    try:
+        return {name for name in os.listdir(SHM) if "fastrtps_" in name}
+    except OSError:
+        return set()
 
 
 def shm_files_of(pid: int | str) -> set[str]:
@@ -22,13 +29,39 @@ def shm_files_of(pid: int | str) -> set[str]:
         with open(f"/proc/{pid}/maps") as maps:
             used.update(line.rsplit(SHM + "/", 1)[1].split()[0]
                         for line in maps if SHM + "/" in line)
-        for fd in os.listdir(f"/proc/{pid}/fd"):
-            target = os.readlink(f"/proc/{pid}/fd/{fd}")
-            if target.startswith(SHM + "/"):
-                used.add(target[len(SHM) + 1:])
+        used |= _open_shm_files(pid)
     except OSError:
         pass  # the process ended, or is not ours to read
     return used
+
+
+def _open_shm_files(pid: int | str) -> set[str]:
+    names = set()
+    for fd in os.listdir(f"/proc/{pid}/fd"):
+        target = os.readlink(f"/proc/{pid}/fd/{fd}")
+        if target.startswith(SHM + "/"):
+            names.add(target[len(SHM) + 1:])
+    return names
+
+
+def own_fast_dds_files(pid: int | str) -> set[str]:
+    """The Fast DDS files that belong to process `pid`: its segment and the ports it listens on,
+    each known by the lock file it holds open (`<name>_el`, `<name>_sl`), with the port's
+    mutex. (A process also maps its peers' segments and ports, to write to them: not its own.)"""
+    try:
+        locks = {name for name in _open_shm_files(pid)
+                 if "fastrtps_" in name and name.endswith(("_el", "_sl"))}
+    except OSError:
+        return set()
+    return {f"{base}{suffix}" for base in (name[:-3] for name in locks)
+            for suffix in ("", "_el", "_sl")} | {f"sem.{name[:-3]}_mutex" for name in locks}
+
+
+def remove_files_of_dead_process(names: set[str]) -> list[str]:
+    """Remove a dead process's own Fast DDS files at once, though its peers still map them: a
+    peer that opens such a port again then creates a fresh one instead of waiting for the
+    dead listener's health check (fastdds_profile.xml: 30 s). Returns the problems."""
+    return _remove(names & fast_dds_shm_files())
 
 
 def shm_files_in_use() -> set[str]:
@@ -44,9 +77,13 @@ def remove_unused_fast_dds_files(names: set[str] | None = None) -> list[str]:
     """Remove the Fast DDS files (all, or `names`) that no process uses, as `fastdds shm clean`
     does: what killed processes left behind. Returns a line for each file that could not be
     removed (another user's, say)."""
-    problems = []
     candidates = fast_dds_shm_files() if names is None else names & fast_dds_shm_files()
-    for name in candidates - shm_files_in_use():
+    return _remove(candidates - shm_files_in_use())
+
+
+def _remove(names: set[str]) -> list[str]:
+    problems = []
+    for name in sorted(names):
         try:
             os.unlink(os.path.join(SHM, name))
         except FileNotFoundError:

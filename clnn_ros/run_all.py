@@ -35,7 +35,7 @@ from .cli import OneLineArgumentParser
 from .core.checkpoint import OPTIMAL, Checkpoint, load_checkpoint
 from .core.episode import start_from_setting
 from .core.params import ParamError, Params, params_from_strings
-from .names import GRAPH_NODES, RECORDER, RUN_SETTINGS, TRIAL_MANAGER
+from .names import GRAPH_NODES, NOT_STARTED, RECORDER, RUN_SETTINGS, TRIAL_MANAGER
 from .nodes.common import EXIT_WITH_STDIN, catch_signals
 from .nodes.parameters import convert_setting, read_params_file
 from .supervise import Supervisor
@@ -56,7 +56,6 @@ RUN_ALL_SETS = {"out_dir": "--out", "extra_nodes": "--bag / --no-record",
 PYTHON_NAMES = ("python", "python3")
 SHUTDOWN_GRACE_S = 5.0  # how long nodes get to exit after the episode ends or Ctrl-C
 RECORDER_GRACE_S = 5.0  # how long the recorder gets to finish the bag after the nodes
-PROBE_S = 0.5  # how long run_all looks for another graph of its names before it starts one
 
 
 def parse_args(argv):
@@ -226,33 +225,12 @@ def child_environment() -> dict:
     return {**os.environ, EXIT_WITH_STDIN: "1"}
 
 
-def another_graph(namespace: str) -> list[str]:
-    """Names of this graph's nodes that already run in `namespace` on this ROS domain (looked
-    for during PROBE_S: discovery of a running participant takes a fraction of that)."""
-    import rclpy
-    from rclpy.node import Node
-    context = rclpy.Context()
-    rclpy.init(args=[], context=context)
-    try:
-        probe = Node("_run_all_probe", context=context, enable_rosout=False,
-                     start_parameter_services=False)
-        deadline, found = time.monotonic() + PROBE_S, set()
-        while time.monotonic() < deadline and not found:
-            time.sleep(0.05)
-            found = {name for name, ns in probe.get_node_names_and_namespaces()
-                     if ns == namespace and name in (*NODES, RECORDER)}
-        probe.destroy_node()
-        return sorted(found)
-    finally:
-        context.try_shutdown()
-
-
 def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
                  env_command: list[str] | None, namespace: str,
-                 interrupted: list[int]) -> tuple[int, str | None]:
+                 interrupted: list[int]) -> tuple[int, bool]:
     """Start the nodes (env_command None: no environment) and watch them until the trial
-    manager ends. Returns (its exit status, or 128 + signal; the failure run_all saw itself:
-    a node that exited with an error, named with how)."""
+    manager ends. Returns (its exit status, or 128 + signal; whether run_all saw a process fail
+    itself, and said so: one that exited with an error or a signal)."""
     params_file = workdir / "params.yaml"
     params_file.write_text(yaml.safe_dump({"/**": {"ros__parameters": values}}))
     arguments = ros_arguments(params_file, namespace)
@@ -264,19 +242,29 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
     manager = supervisor.children[TRIAL_MANAGER]
     failure = None
     while manager.returncode is None and not interrupted:
-        if failed := supervisor.first_failure(exclude={TRIAL_MANAGER}):
-            failure = failed
+        if failure := supervisor.first_failure(exclude={TRIAL_MANAGER}):
             break
         time.sleep(0.02)
+    if manager.returncode is not None and manager.returncode < 0:
+        failure = manager  # stopped from outside: it sent no EPISODE_END
+        supervisor.release(manager)
+    # Ctrl-C reaches every process of the terminal's group: run_all's own handler has run long
+    # before a child handled it and exited.
+    if failure is not None and not interrupted:
+        report_failure(failure)
     nodes = [n for n in NODES if n in supervisor.children]
-    if interrupted or failure or manager.returncode < 0:  # no EPISODE_END came: stop now
-        forced = supervisor.stop(nodes, SHUTDOWN_GRACE_S, interrupt=True)
-    else:
-        forced = supervisor.stop(nodes, SHUTDOWN_GRACE_S, interrupt=False)
-    warn_forced(forced)
+    warn_forced(supervisor.stop(nodes, SHUTDOWN_GRACE_S,
+                                interrupt=bool(interrupted or failure)))
     if interrupted:
-        return 128 + interrupted[0], None
-    return manager.returncode, failure.describe_exit() if failure else None
+        return 128 + interrupted[0], False
+    return manager.returncode, failure is not None
+
+
+def report_failure(child) -> None:
+    """The one error line, at once, then the last lines of the child's stderr."""
+    print(f"run_all: error: {child.describe_exit()}", file=sys.stderr, flush=True)
+    for line in child.last_lines():
+        print(f"  {child.name}| {line}", file=sys.stderr, flush=True)
 
 
 def warn_forced(names: list[str]) -> None:
@@ -290,7 +278,7 @@ def run_composed(values: dict, environment: str | None, namespace: str,
     """All nodes in this process on one executor."""
     import importlib
     from .nodes.agent import AgentNode
-    from .nodes.common import init_rclpy, spin_until_finished
+    from .nodes.common import init_ros, spin_until_finished
     from .nodes.encoder import EncoderNode
     from .nodes.reward import RewardNode
     from .nodes.trial_manager import TrialManagerNode
@@ -299,7 +287,7 @@ def run_composed(values: dict, environment: str | None, namespace: str,
     if environment is not None:
         module, name = ENVIRONMENTS[environment]
         classes.insert(0, getattr(importlib.import_module(module), name))
-    init_rclpy([sys.argv[0]])
+    init_ros([sys.argv[0]])
     nodes = []
     try:
         options = dict(overrides=values, namespace=None if namespace == "/" else namespace,
@@ -332,10 +320,13 @@ def start_recorder(supervisor: Supervisor, values: dict, bag_path: Path, workdir
                                 *ros_arguments(params_file, namespace)], child_environment())
 
 
-def stop_recorder(supervisor: Supervisor, episode_ended: bool) -> None:
+def stop_recorder(supervisor: Supervisor, episode_ended: bool) -> bool:
     """After the nodes: the recorder ends by itself after EPISODE_END; otherwise (Ctrl-C, the
-    trial manager stopped from outside) it is told to finish the bag now."""
-    warn_forced(supervisor.stop([RECORDER], RECORDER_GRACE_S, interrupt=not episode_ended))
+    trial manager stopped from outside) it is told to finish the bag now. Returns whether it
+    had to be terminated."""
+    forced = supervisor.stop([RECORDER], RECORDER_GRACE_S, interrupt=not episode_ended)
+    warn_forced(forced)
+    return bool(forced)
 
 
 def default_bag_path(out_dir: Path | None) -> Path:
@@ -393,11 +384,6 @@ def main(argv=None) -> int:
 
 def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
         environment: str | None, env_command: list[str] | None, interrupted: list[int]) -> int:
-    if running := another_graph(namespace):
-        print(f"run_all: error: a graph already runs in namespace {namespace} on ROS domain "
-              f"{os.environ.get('ROS_DOMAIN_ID') or '0'} (nodes {', '.join(running)}); give "
-              f"this one --namespace NAME or another ROS_DOMAIN_ID", file=sys.stderr)
-        return 1
     began = time.time()
     with tempfile.TemporaryDirectory(prefix="clnn_ros_") as tmp:
         out = args.out or Path(tmp) / "out"
@@ -418,21 +404,24 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
             print(f"run_all: waiting for an environment node in namespace {namespace} (at most "
                   f"{values.get('stall_timeout_s', RUN_SETTINGS['stall_timeout_s']):g} s once the "
                   f"rest is ready)", flush=True)
-        failure = None
+        failed = False
         if args.composed:
             status = run_composed(values, environment, namespace, interrupted)
         else:
-            status, failure = run_separate(supervisor, values, Path(tmp), env_command,
-                                           namespace, interrupted)
+            status, failed = run_separate(supervisor, values, Path(tmp), env_command,
+                                          namespace, interrupted)
         if bag_path is not None:
             recorder = supervisor.children[RECORDER]
-            if failure is None and recorder.returncode not in (None, 0):
-                failure = recorder.describe_exit()  # it failed first: the graph then stopped
-            stop_recorder(supervisor, episode_ended=status in (0, 1) and failure is None)
-            if failure is None and recorder.returncode not in (0, 128 + signal.SIGINT):
-                failure = recorder.describe_exit()
+            if not failed and not interrupted and recorder.returncode not in (None, 0):
+                report_failure(recorder)  # it failed first: the graph then stopped
+                failed = True
+            forced = stop_recorder(supervisor, episode_ended=status in (0, 1) and not failed)
+            if not failed and not interrupted and not forced and \
+                    recorder.returncode not in (0, 128 + signal.SIGINT):
+                report_failure(recorder)
+                failed = True
         summary = fresh_summary(out, began)
-    if summary and failure is None:
+    if summary and not failed:
         mean = summary["mean_steps"]
         print(f"run_all: {summary['exit_reason']}: {summary['trials']} trials, mean steps "
               f"{mean if mean is None else round(mean, 1)}, {summary['ticks']} ticks, "
@@ -443,16 +432,15 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
             bag_path.unlink()  # created here to check it could be; the recorder never started
         print(f"run_all: bag {bag_path}" if bag_path.exists() else
               f"run_all: nothing recorded, no bag", flush=True)
-    if status in (128 + signal.SIGINT, 128 + signal.SIGTERM) and failure is None:
+    if failed:
+        return 1
+    if status in (128 + signal.SIGINT, 128 + signal.SIGTERM):
         print("run_all: interrupted", file=sys.stderr)
         return status
-    if failure is not None:
-        at = f" at tick {summary['ticks'] - 1}" if summary.get("ticks") else ""
-        print(f"run_all: error: {failure}{at}", file=sys.stderr)
-        return 1
+    if status == NOT_STARTED and bag_path is not None:
+        bag_path.unlink(missing_ok=True)  # what it holds is another graph's
     if status != 0:
-        reason = summary.get("exit_reason") or (
-            f"the trial manager {'died (' + signal.Signals(-status).name + ')' if status < 0 else f'exited with status {status}'}")
+        reason = summary.get("exit_reason") or f"the trial manager exited with status {status}"
         print(f"run_all: error: {reason}", file=sys.stderr)
         return 1
     return 0

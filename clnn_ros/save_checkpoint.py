@@ -1,5 +1,6 @@
 """Ask the running graph's agent to save a checkpoint now, like
-`ros2 service call /agent/save_checkpoint std_srvs/srv/Trigger`.
+`ros2 service call /agent/save_checkpoint std_srvs/srv/Trigger` (--namespace NAME: the graph
+of `run_all --namespace NAME`, /NAME/agent/save_checkpoint).
 
     python -m clnn_ros.save_checkpoint       # prints <out_dir>/checkpoint_<tick>.npz
 
@@ -19,7 +20,6 @@ import rclpy
 from std_srvs.srv import Trigger
 
 from .cli import OneLineArgumentParser
-from .nodes.agent import SAVE_CHECKPOINT
 from .nodes.common import ros_session
 
 
@@ -29,12 +29,15 @@ def main(argv=None) -> int:
                                    description=__doc__.split("\n\n")[0])
     parser.add_argument("--wait", type=float, default=10.0,
                         help="seconds to wait for the agent's answer (10)")
+    parser.add_argument("--namespace", default="/", help="the graph's namespace (/)")
     args = parser.parse_args(argv)
+    service = "/" + "/".join(filter(None, [*args.namespace.split("/"), "agent",
+                                           "save_checkpoint"]))
     with ros_session() as received:
         node = rclpy.create_node("save_checkpoint", start_parameter_services=False,
                                  enable_rosout=False)
         try:
-            client = node.create_client(Trigger, SAVE_CHECKPOINT)
+            client = node.create_client(Trigger, service)
             deadline = time.monotonic() + args.wait
             future = None
             while not received and time.monotonic() < deadline:
@@ -47,7 +50,7 @@ def main(argv=None) -> int:
                     return 0 if response.success else 1
             if received:
                 return 128 + received[0]
-            print(f"save_checkpoint: error: no agent answered on {SAVE_CHECKPOINT} within "
+            print(f"save_checkpoint: error: no agent answered on {service} within "
                   f"{args.wait:g} s (is the graph running on this ROS_DOMAIN_ID?)",
                   file=sys.stderr)
             return 2

@@ -20,7 +20,8 @@ import threading
 import time
 from collections import deque
 
-from .rosenv import remove_unused_fast_dds_files, shm_files_of
+from .rosenv import (own_fast_dds_files, remove_files_of_dead_process,
+                     remove_unused_fast_dds_files)
 
 TAIL_LINES = 5
 SAMPLE_S = 0.5  # how often the children's shared-memory files are noted
@@ -34,6 +35,7 @@ class Child:
     def __init__(self, name: str, command: list[str], env: dict):
         self.name = name
         self.tail = deque(maxlen=TAIL_LINES)
+        self.shm_files: set[str] = set()  # its own Fast DDS files, noted while it runs
         self.process = subprocess.Popen(command, stdin=subprocess.PIPE, stderr=subprocess.PIPE,
                                         env=env)
         self._reader = threading.Thread(target=self._pass_stderr, daemon=True,
@@ -87,7 +89,7 @@ class Child:
 
 
 class Supervisor:
-    """The children of one run and the shared-memory files they used."""
+    """The children of one run and their own Fast DDS files (and run_all's)."""
 
     def __init__(self):
         self.children: dict[str, Child] = {}
@@ -100,22 +102,28 @@ class Supervisor:
         self.children[name] = child = Child(name, command, env)
         return child
 
-    def _pids(self) -> list[int]:
-        return [os.getpid()] + [c.process.pid for c in self.children.values()
-                                if c.process.poll() is None]
-
     def _sample(self) -> None:
         while not self._stop_sampling.wait(SAMPLE_S):
-            self.note_shm_files()
-
-    def note_shm_files(self) -> None:
-        for pid in self._pids():
-            self.shm_files |= shm_files_of(pid)
+            self.shm_files |= own_fast_dds_files(os.getpid())
+            for child in list(self.children.values()):
+                if child.process.poll() is None:
+                    child.shm_files |= own_fast_dds_files(child.process.pid)
 
     def first_failure(self, exclude: set[str]) -> Child | None:
-        """A child (not in `exclude`) that exited with a non-zero status or a signal."""
-        return next((c for name, c in self.children.items() if name not in exclude
-                     and c.returncode not in (None, 0)), None)
+        """A child (not in `exclude`) that exited with a non-zero status or a signal. Its own
+        Fast DDS files are removed at once if a signal killed it (it could not)."""
+        failed = next((c for name, c in self.children.items() if name not in exclude
+                       and c.returncode not in (None, 0)), None)
+        if failed is not None:
+            self.release(failed)
+        return failed
+
+    @staticmethod
+    def release(child: Child) -> None:
+        """Remove the own Fast DDS files of a child that a signal killed (it could not)."""
+        if child.returncode is not None and child.returncode < 0:
+            for problem in remove_files_of_dead_process(child.shm_files):
+                print(f"run_all: warning: {problem}", file=sys.stderr, flush=True)
 
     def stop(self, names: list[str], grace_s: float, interrupt: bool) -> list[str]:
         """Stop these children: SIGINT first if `interrupt`, else they get `grace_s` to exit
@@ -143,4 +151,5 @@ class Supervisor:
         self._sampler.join(timeout=2.0)
         for child in self.children.values():
             child.close()
+            self.shm_files |= child.shm_files
         return remove_unused_fast_dds_files(self.shm_files)

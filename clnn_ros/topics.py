@@ -22,6 +22,11 @@ from .nodes.common import ros_session
 OWN = {"/parameter_events", "/rosout"}  # this tool's own node has these
 
 
+def is_hidden(name: str) -> bool:
+    """ROS's convention: a name with a part starting with _ is hidden."""
+    return any(part.startswith("_") for part in name.split("/"))
+
+
 def main(argv=None) -> int:
     parser = OneLineArgumentParser(prog="python -m clnn_ros.topics", name="topics",
                                    description=__doc__.split("\n\n")[0])
@@ -30,6 +35,8 @@ def main(argv=None) -> int:
     parser.add_argument("--wait", type=float, default=5.0,
                         help="at most this many seconds of discovery (5); it lists as soon as "
                              "the graph's topics have been stable for 1 s")
+    parser.add_argument("--include-hidden-topics", action="store_true",
+                        help="also the plumbing (names with a part starting with _)")
     args = parser.parse_args(argv)
     with ros_session() as received:
         node = rclpy.create_node("topics", start_parameter_services=False, enable_rosout=False)
@@ -47,6 +54,8 @@ def main(argv=None) -> int:
             if received:
                 return 128 + received[0]
             for name, types in sorted(node.get_topic_names_and_types()):
+                if not args.include_hidden_topics and is_hidden(name):
+                    continue
                 line = f"{name} [{', '.join(types)}]"
                 if args.count:
                     line += (f"  publishers {node.count_publishers(name)}, subscribers "

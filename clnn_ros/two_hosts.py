@@ -4,7 +4,12 @@ is restricted to that link. Runs the same episode across the link, then on one h
 the results are equal and prints both throughputs (docs/MULTI_HOST.md).
 
     python -m clnn_ros.two_hosts --seed 1 --trials 8 --max-steps 1500 --out DIR
+    python -m clnn_ros.two_hosts --start external --namespace robot1 ...
 
+--start env-node (default): run_all in B starts the environment in A through `--env-node "ip
+netns exec A ..."`; external: run_all in B runs `--env external`, and the environment node is
+started in A separately (as on a robot, by hand or over ssh) once run_all waits for it, with the
+run's parameters on its command line. --namespace NAME puts the graph under /NAME on both hosts.
 Needs root (ip netns). The namespaces are named per run and removed on every exit (Ctrl-C,
 SIGTERM, a failed run). DIR/one_host and DIR/two_hosts hold each run's results and bag.
 Exit status: 0 equal results, 1 a run failed or the results differ, 2 bad input or no
@@ -21,6 +26,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -31,7 +37,9 @@ import numpy as np
 
 from .cli import OneLineArgumentParser
 from .core.params import ParamError, params_from_strings
-from .nodes.common import catch_signals, convert_setting
+from .nodes.common import EXIT_WITH_STDIN, catch_signals
+from .nodes.parameters import convert_setting
+from .run_all import namespace_problem
 
 # Addresses of the link: private to the two namespaces, so every run may use the same ones.
 ADDRESSES = ("10.231.0.1", "10.231.0.2")
@@ -45,6 +53,12 @@ DISCOVERY = {
     "static-peers": lambda peer: {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
                                   "ROS_STATIC_PEERS": peer},
 }
+
+
+# How the environment node in host A is started.
+START_MODES = ("env-node", "external")
+WAITING = "run_all: waiting for an environment node"  # run_all --env external's line
+ENV_EXIT_S = 10.0  # how long the environment node gets to exit after the run
 
 
 class NamespaceError(Exception):
@@ -116,27 +130,75 @@ def veth_link() -> Iterator[Link]:
             ip("netns", "del", namespace)  # the veth pair goes with it
 
 
-def run_graph(command: list[str], signals: list[int]) -> int:
+def run_graph(command: list[str], signals: list[int], on_line=None) -> int:
     """Run run_all to its end. A signal to this process (recorded in `signals`) is passed on and
-    run_all shuts its graph down itself; then Interrupted is raised so that the namespaces go."""
+    run_all shuts its graph down itself; then Interrupted is raised so that the namespaces go.
+    on_line: called with each line of run_all's stdout (passed on to ours)."""
     if signals:
         raise Interrupted(signals[0])
-    process = subprocess.Popen(command)
+    process = subprocess.Popen(command, stdout=None if on_line is None else subprocess.PIPE,
+                               text=True)
+    reader = None
+    if on_line is not None:
+        def read() -> None:
+            for line in process.stdout:
+                print(line, end="", flush=True)
+                on_line(line)
+        reader = threading.Thread(target=read, daemon=True, name="run_all-stdout")
+        reader.start()
     passed_on = 0
     while process.poll() is None:
         for signum in signals[passed_on:]:
             process.send_signal(signum)
         passed_on = len(signals)
         time.sleep(0.05)
+    if reader is not None:
+        reader.join(timeout=5.0)
     if signals:
         raise Interrupted(signals[0])
     return process.returncode
 
 
+def environment_arguments(args) -> list[str]:
+    """What the environment node started by hand gets: the run's parameters that matter to it
+    (the recorder that run_all adds subscribes to its state too) and the namespace."""
+    arguments = ["--ros-args", "-p", f"seed:={args.seed}", "-p", f"trials:={args.trials}",
+                 "-p", f"max_steps:={args.max_steps}", "-p", f"nsv:={args.nsv}",
+                 "-p", "extra_nodes:=recorder", "--log-level", "warn"]
+    if args.namespace:
+        arguments += ["-r", f"__ns:=/{args.namespace}", "-r",
+                      f"/clock:=/{args.namespace}/clock"]
+    return arguments
+
+
+def run_with_external_environment(command: list[str], environment: list[str],
+                                  signals: list[int]) -> int:
+    """run_all --env external (`command`); once it waits, `environment` starts, with a pipe on
+    stdin and EXIT_WITH_STDIN as run_all gives its own nodes. After the run the node gets
+    ENV_EXIT_S to exit (it does on EPISODE_END), then its stdin is closed, then it is killed."""
+    started = []
+
+    def start_when_waiting(line: str) -> None:
+        if line.startswith(WAITING) and not started:
+            started.append(subprocess.Popen(environment, stdin=subprocess.PIPE))
+    try:
+        return run_graph(command, signals, on_line=start_when_waiting)
+    finally:
+        for process in started:
+            for stop in (lambda: None, process.stdin.close, process.kill):
+                stop()
+                try:
+                    process.wait(timeout=ENV_EXIT_S)
+                    break
+                except subprocess.TimeoutExpired:
+                    continue
+
+
 def run_all_command(args, out: Path) -> list[str]:
     return [sys.executable, "-m", "clnn_ros.run_all", "--seed", str(args.seed),
             "--trials", str(args.trials), "--max-steps", str(args.max_steps), "--nsv",
-            str(args.nsv), "--stall-timeout", str(args.stall_timeout), "--out", str(out)]
+            str(args.nsv), "--stall-timeout", str(args.stall_timeout), "--out", str(out)] + \
+        (["--namespace", args.namespace] if args.namespace else [])
 
 
 def compare(one_host: Path, two_hosts: Path) -> list[str]:
@@ -159,10 +221,21 @@ def parse_args(argv):
     parser.add_argument("--nsv", type=int, default=1)
     parser.add_argument("--discovery", choices=tuple(DISCOVERY), default="subnet",
                         help="subnet: multicast on the link; static-peers: unicast to the peer only")
+    parser.add_argument("--start", choices=START_MODES, default="env-node",
+                        help="env-node: run_all starts the environment in host A (--env-node); "
+                             "external: run_all --env external, the environment started "
+                             "separately in host A")
+    parser.add_argument("--namespace", metavar="NAME",
+                        help="put the graph under /NAME (run_all --namespace) on both hosts")
     parser.add_argument("--stall-timeout", type=float, default=20.0,
                         help="run_all's stall timeout (s); the link adds latency to every tick")
     parser.add_argument("--out", type=Path, help="keep both runs' results here (default: a temp dir)")
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    if args.namespace is not None:
+        if problem := namespace_problem(args.namespace):
+            parser.error(f"--namespace {args.namespace!r}: {problem}")
+        args.namespace = args.namespace.strip("/")
+    return args
 
 
 def main(argv=None) -> int:
@@ -193,10 +266,16 @@ def run_both(args, link: Link, out: Path, signals: list[int]) -> int:
     discovery = DISCOVERY[args.discovery]
     env_node = link.exec_prefix(0, discovery(link.addresses[1])) + \
         [sys.executable, "-m", "clnn_ros.nodes.environment"]
+    run_all_b = link.exec_prefix(1, discovery(link.addresses[0])) + \
+        run_all_command(args, two_hosts)
     sent_before, received_before = link.packets(0)
-    status = run_graph(link.exec_prefix(1, discovery(link.addresses[0]))
-                       + run_all_command(args, two_hosts) + ["--env-node", shlex.join(env_node)],
-                       signals)
+    if args.start == "external":
+        by_hand = link.exec_prefix(0, {**discovery(link.addresses[1]), EXIT_WITH_STDIN: "1"}) + \
+            [sys.executable, "-m", "clnn_ros.nodes.environment", *environment_arguments(args)]
+        status = run_with_external_environment(run_all_b + ["--env", "external"], by_hand,
+                                               signals)
+    else:
+        status = run_graph(run_all_b + ["--env-node", shlex.join(env_node)], signals)
     sent, received = (now - before for now, before in
                       zip(link.packets(0), (sent_before, received_before)))
     if status != 0:
@@ -213,7 +292,9 @@ def run_both(args, link: Link, out: Path, signals: list[int]) -> int:
     ticks = summaries[1]["ticks"]
     rates = [summary["ticks_per_s"] for summary in summaries]
     verdict = "equal results" if not differences else "DIFFERENT " + ", ".join(differences)
-    print(f"two_hosts: {verdict} ({summaries[1]['trials']} trials, {ticks} ticks); {args.discovery} discovery; "
+    print(f"two_hosts: {verdict} ({summaries[1]['trials']} trials, {ticks} ticks); "
+          f"{args.discovery} discovery, environment {args.start}"
+          f"{', namespace /' + args.namespace if args.namespace else ''}; "
           f"across the link {rates[1]:.0f} ticks/s vs one host {rates[0]:.0f} ticks/s "
           f"({rates[1] / rates[0]:.2f}x); the environment's host sent {sent} and received "
           f"{received} packets on the link ({sent / ticks:.1f} / {received / ticks:.1f} per tick)",

@@ -4,16 +4,19 @@
     python -m clnn_ros.check_env_node python examples/noisy_cartpole.py --ros-args \\
         -p force_noise:=0.2
 Its own parameters (-p on its command line): cart_friction, pole_friction, force_noise.
+Topic names are relative: `--ros-args -r __ns:=/robot1 -r /clock:=/robot1/clock` moves it.
 """
-import math, random
+import math, os, random, threading
 import rclpy
+from rclpy.clock import Clock as RosClock, ClockType
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 from clnn_ros_msgs.msg import Action, CartPoleState, TrialEvent
 
-LOCKSTEP = QoSProfile(depth=64, reliability=ReliabilityPolicy.RELIABLE)  # KEEP_LAST, VOLATILE
+LOCKSTEP = QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE)  # KEEP_LAST, VOLATILE
 READY = QoSProfile(depth=16, reliability=ReliabilityPolicy.RELIABLE,
                    durability=DurabilityPolicy.TRANSIENT_LOCAL)
 DEFAULTS = dict(tau=0.02, max_steps=10000, angle_limit_deg=12.0, track_limit_m=2.4, gravity=9.8,
@@ -24,17 +27,20 @@ DEFAULTS = dict(tau=0.02, max_steps=10000, angle_limit_deg=12.0, track_limit_m=2
 class NoisyCartPole(Node):
     def __init__(self):
         super().__init__("environment", automatically_declare_parameters_from_overrides=True)
+        self.set_parameters([rclpy.Parameter("use_sim_time", value=True)])  # ROS time = tick * tau
         self.p = {k: self.get_parameter_or(k, rclpy.Parameter(k, value=v)).value
                   for k, v in DEFAULTS.items()}
         self.rng, self.tau_ns = random.Random(self.p["noise_seed"]), round(self.p["tau"] * 1e9)
         self.tick, self.trial, self.steps, self.over, self.done = 0, 0, 0, True, False
         self.pending, self.s = {}, [0.0, 0.0, 0.0, 0.0]  # x m, dx/dt m/s, theta rad, rad/s
-        self.pub = self.create_publisher(CartPoleState, "/cartpole/state", LOCKSTEP)
-        self.ready = self.create_publisher(String, "/graph/ready", READY)
-        self.timer = self.create_timer(0.02, self.announce)
-        self.create_subscription(Clock, "/clock", self.on_clock, LOCKSTEP)
-        self.create_subscription(TrialEvent, "/trial/event", self.on_event, LOCKSTEP)
-        self.create_subscription(Action, "/rln/action", self.on_action, LOCKSTEP)
+        self.pub = self.create_publisher(CartPoleState, "cartpole/state", LOCKSTEP)
+        self.ready = self.create_publisher(String, "_graph/ready", READY)
+        # sim time stands still before the first tick: the readiness timer runs on steady time
+        self.timer = self.create_timer(0.02, self.announce, clock=RosClock(
+            clock_type=ClockType.STEADY_TIME))
+        self.create_subscription(Clock, "clock", self.on_clock, LOCKSTEP)
+        self.create_subscription(TrialEvent, "trial/event", self.on_event, LOCKSTEP)
+        self.create_subscription(Action, "rln/action", self.on_action, LOCKSTEP)
 
     def announce(self):  # encoder, reward and trial manager subscribe to the state
         if self.pub.get_subscription_count() >= 3:
@@ -110,12 +116,20 @@ class NoisyCartPole(Node):
         return "cart_position" if abs(self.s[0]) > p["track_limit_m"] else ""
 
 
+def stop_at_end_of_stdin(node):  # run_all never writes to our stdin: end of file = it is gone
+    while os.read(0, 4096):  # the raw fd (a daemon thread inside sys.stdin blocks the exit)
+        pass
+    node.done = True
+
+
 rclpy.init()
 node = NoisyCartPole()
+if os.environ.get("CLNN_ROS_EXIT_WITH_STDIN") == "1":
+    threading.Thread(target=stop_at_end_of_stdin, args=(node,), daemon=True).start()
 try:
     while rclpy.ok() and not node.done:
         rclpy.spin_once(node, timeout_sec=0.1)
-except KeyboardInterrupt:
+except (KeyboardInterrupt, ExternalShutdownException):  # SIGINT, SIGTERM: a quiet exit
     pass
 node.destroy_node()
 rclpy.try_shutdown()

@@ -5,7 +5,7 @@
 BUG: no_reset (successful_steps not reset at START), wrong_tick (the state of tick 2 and later
 is published with the tick one too high), no_exit (ignores EPISODE_END), accept_bad_force
 (applies force_direction 5 as +F), silent (never announces readiness), mute (stops publishing
-states at tick 50 but stays alive).
+states at tick 50 but stays alive), crash (raises at start).
 """
 
 import sys
@@ -19,6 +19,8 @@ BUGS = set(sys.argv.pop(1).split(","))
 
 class BrokenEnvironmentNode(EnvironmentNode):
     def __init__(self, **options):
+        if "crash" in BUGS:
+            raise RuntimeError("a bug at start")
         super().__init__(**options)
         if "silent" in BUGS:
             self._ready_timer.cancel()

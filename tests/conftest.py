@@ -1,6 +1,9 @@
-"""Session-wide test fixtures."""
+"""Session-wide test fixtures, and ROS domains of the tests' own."""
 
+import errno
+import fcntl
 import os
+import socket
 import subprocess
 
 import pytest
@@ -26,6 +29,42 @@ def remove_shared_memory_of_killed_nodes():
     before = fast_dds_shm_files()
     yield
     remove_unused_fast_dds_files(fast_dds_shm_files() - before)
+
+
+DOMAINS = range(1, 170)  # 0 is everyone's default; 170-232 are left to people's experiments
+LOCKS = "/tmp/clnn_ros_test_domains"
+_held = []  # the lock files this test process holds (released when it exits)
+
+
+def free_domain_id() -> str:
+    """A ROS domain that no other run on this machine uses: one whose lock file no other test
+    process holds and on which no DDS participant listens (Fast DDS gives a domain's first
+    participant the UDP port 7410 + 250 x domain; a taken port means the domain is in use)."""
+    os.makedirs(LOCKS, exist_ok=True)
+    start = os.getpid() % len(DOMAINS)
+    for offset in range(len(DOMAINS)):
+        domain = DOMAINS[(start + offset) % len(DOMAINS)]
+        lock = open(os.path.join(LOCKS, f"{domain}.lock"), "w")
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            lock.close()
+            continue
+        if port_in_use(7410 + 250 * domain):
+            lock.close()
+            continue
+        _held.append(lock)
+        return str(domain)
+    raise RuntimeError(f"no free ROS domain in {DOMAINS}")
+
+
+def port_in_use(port: int) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.bind(("0.0.0.0", port))
+        except OSError as error:
+            return error.errno == errno.EADDRINUSE
+    return False
 
 
 def ros_environment(domain_id: str, tmp_path_factory) -> dict:

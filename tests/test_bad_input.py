@@ -18,7 +18,9 @@ import pytest
 
 from clnn_ros import run_all
 
-DOMAIN_ID = str(50 + os.getpid() % 20)
+from conftest import free_domain_id
+
+DOMAIN_ID = free_domain_id()
 FAST_CPU_S = 5.0  # run_all's refusal, interpreter start included (about 0.5 s; a graph: far more)
 
 # Files each case finds in its working directory.

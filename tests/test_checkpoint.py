@@ -20,10 +20,10 @@ from clnn_ros.core.optimal import optimal_weights
 from clnn_ros.core.params import Params
 from clnn_ros.core.physics import CONTINUE
 
-from conftest import ros_environment
+from conftest import free_domain_id, ros_environment
 from test_graph import run_all
 
-DOMAIN_ID = str(30 + os.getpid() % 20)
+DOMAIN_ID = free_domain_id()
 SEED = 1
 # tie_break=random and success_counter=carry: the random stream and the success count cross
 # trial boundaries, so a resume must restore them too

@@ -1,20 +1,27 @@
 """Swapping the environment node: the contract checker passes the project's environment nodes
 (paper cart-pole, gymnasium, the example) and fails broken ones with the right explanation; a
 gymnasium-node run equals the core driving gymnasium's physics; the encoder edges are
-parameters (docs/ENV_CONTRACT.md)."""
+parameters; `run_all --env external` runs with an environment node started by someone else
+(also in a namespace) and fails with one line when none comes (docs/ENV_CONTRACT.md)."""
 
 from __future__ import annotations
 
 import csv
+import errno
 import os
+import queue
+import socket
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from clnn_ros.batch import run_batch
+from clnn_ros.check_env_node import RULES
 from clnn_ros.core.encoder import Encoder
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.gym_physics import GymCartPole, gym_matched_params
@@ -23,7 +30,23 @@ from clnn_ros.core.params import ParamError, Params, params_from_strings
 ROOT = Path(__file__).resolve().parents[1]
 BROKEN = str(Path(__file__).with_name("broken_env_node.py"))
 PY = sys.executable
-# name: (node command, checker options, lines the report must have)
+
+
+def domain_in_use(domain: int) -> bool:
+    """Fast DDS gives a domain's first participant the UDP port 7410 + 250 x domain."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.bind(("0.0.0.0", 7410 + 250 * domain))
+        except OSError as error:
+            return error.errno == errno.EADDRINUSE
+    return False
+
+
+# This module's ROS domain: one of 190-199 that no participant uses now.
+DOMAIN_ID = str(next((d for d in (190 + (os.getpid() + i) % 10 for i in range(10))
+                      if not domain_in_use(d)), 190 + os.getpid() % 10))
+# name: (node command, checker options, lines the report must have); each check runs in its
+# own namespace /check_<name> of the module's domain
 CHECKS = {
     "cartpole": ([PY, "-m", "clnn_ros.nodes.environment", "--ros-args", "-p", "physics:=paper"],
                  [], ["check_env_node: all rules pass"]),
@@ -39,39 +62,49 @@ CHECKS = {
                 ["FAIL  readiness: no readiness announcement",
                  "FAIL  refusals: does not refuse an action with force_direction 5",
                  "FAIL  episode_end: does not exit on EPISODE_END", "PASS  lockstep",
-                 "PASS  successful_steps", "PASS  failure"]),
+                 "PASS  successful_steps", "PASS  failure", "PASS  stdin_eof"]),
+    # the example with its state topic remapped to an absolute name: not in its namespace
+    "absolute_names": (["python", "examples/noisy_cartpole.py", "--ros-args", "-r",
+                        "cartpole/state:=/cartpole/state"], ["--startup-timeout", "3"],
+                       ["FAIL  interface: does not publish /check_absolute_names/cartpole/state "
+                        "(topic names must be relative); it publishes /cartpole/state",
+                        "FAIL  readiness: no readiness announcement"]),
 }
+PASSING = ("cartpole", "gymnasium", "example")
 
 
 @pytest.fixture(scope="module")
 def ros_env(tmp_path_factory):
-    return {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+    return {**os.environ, "ROS_DOMAIN_ID": DOMAIN_ID, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
             "ROS_LOG_DIR": str(tmp_path_factory.mktemp("ros_log"))}
 
 
 @pytest.fixture(scope="module")
 def checks(ros_env):
-    """All checker runs at once, each in its own ROS domain (they mostly wait on the node)."""
-    base = 160 + (os.getpid() % 8) * 8
+    """All checker runs at once, each in its own namespace of the module's domain (they mostly
+    wait on the node)."""
     running = {name: subprocess.Popen(
-        [PY, "-m", "clnn_ros.check_env_node", "--domain-id", str(base + i), *options, *command],
+        [PY, "-m", "clnn_ros.check_env_node", "--domain-id", DOMAIN_ID, "--namespace",
+         f"/check_{name}", *options, *command],
         cwd=ROOT, env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-        for i, (name, (command, options, _)) in enumerate(CHECKS.items())}
-    return {name: (p.communicate(timeout=120)[0], p.returncode) for name, p in running.items()}
+        for name, (command, options, _) in CHECKS.items()}
+    return {name: (p.communicate(timeout=180)[0], p.returncode) for name, p in running.items()}
 
 
 @pytest.mark.parametrize("name", CHECKS)
 def test_checker(checks, name):
     report, status = checks[name]
-    assert status == (0 if name in ("cartpole", "gymnasium", "example") else 1), report
+    assert status == (0 if name in PASSING else 1), report
     lines = report.splitlines()
     for expected in CHECKS[name][2]:
         assert any(line.startswith(expected) for line in lines), report
+    if name in PASSING:
+        assert sum(line.startswith("PASS  ") for line in lines) == len(RULES), report
 
 
 def test_gymnasium_node_run_equals_core_on_gymnasium_physics(ros_env, tmp_path):
     trials, max_steps, seed = 12, 300, 1
-    env = {**ros_env, "ROS_DOMAIN_ID": str(150 + os.getpid() % 8)}
+    env = ros_env
     result = subprocess.run(
         [PY, "-m", "clnn_ros.run_all", "--quiet", "--env", "gymnasium", "--seed", str(seed),
          "--nsv", "2", "--velocity-edge", "0.3", "--trials", str(trials), "--max-steps",
@@ -135,7 +168,7 @@ def test_run_all_environment_options_are_checked(ros_env, args, message):
 
 
 def test_graph_encodes_other_angle_edges_from_parameters_only(ros_env, tmp_path):
-    env = {**ros_env, "ROS_DOMAIN_ID": str(150 + os.getpid() % 8)}
+    env = ros_env
     result = subprocess.run(
         [PY, "-m", "clnn_ros.run_all", "--quiet", "--no-record", "--option",
          "angle_edges_deg=-3,0,3", "--seed", "1", "--trials", "6", "--max-steps", "400",
@@ -145,3 +178,124 @@ def test_graph_encodes_other_angle_edges_from_parameters_only(ros_env, tmp_path)
     with open(tmp_path / "trials.csv") as f:
         assert [int(r["steps"]) for r in csv.DictReader(f)] == core.steps.tolist()
     np.testing.assert_array_equal(np.load(tmp_path / "final_weights.npy"), core.final_weights)
+
+
+# --- run_all --env external -------------------------------------------------------------------
+
+WAITING = "run_all: waiting for an environment node"
+
+
+class Lines:
+    """A process's text stream read line by line by a thread (the pipe never fills)."""
+
+    def __init__(self, stream):
+        self.queue, self.lines = queue.Queue(), []
+        self.reader = threading.Thread(target=self._read, args=(stream,), daemon=True)
+        self.reader.start()
+
+    def _read(self, stream) -> None:
+        for line in stream:
+            self.queue.put(line.rstrip("\n"))
+        self.queue.put(None)
+
+    def wait_for(self, prefix: str, timeout: float) -> str:
+        deadline = time.monotonic() + timeout
+        while (left := deadline - time.monotonic()) > 0:
+            try:
+                line = self.queue.get(timeout=left)
+            except queue.Empty:
+                break
+            if line is None:
+                break
+            self.lines.append(line)
+            if line.startswith(prefix):
+                return line
+        raise AssertionError(f"no line starting {prefix!r} within {timeout:g} s: {self.lines}")
+
+    def text(self) -> str:
+        self.reader.join(timeout=30)
+        while not self.queue.empty():
+            if (line := self.queue.get()) is not None:
+                self.lines.append(line)
+        return "\n".join(self.lines)
+
+
+def start_external_run(ros_env, arguments: list[str], stderr_file: Path) -> subprocess.Popen:
+    return subprocess.Popen(
+        [PY, "-m", "clnn_ros.run_all", "--quiet", "--env", "external", *arguments], cwd=ROOT,
+        env=ros_env, stdout=subprocess.PIPE, stderr=open(stderr_file, "w"), text=True)
+
+
+def end(*processes: subprocess.Popen | None) -> None:
+    """After a failed assertion: nothing left running (run_all's nodes end with it)."""
+    for process in processes:
+        if process is not None and process.poll() is None:
+            process.kill()
+            process.wait(timeout=30)
+
+
+@pytest.mark.parametrize("namespace", [None, "robot1"])
+def test_external_environment_started_separately(ros_env, tmp_path, namespace):
+    """run_all --env external starts everything but the environment; the environment node,
+    started by hand a few seconds later with the run's parameters (and in the run's namespace),
+    completes the run, which equals the core episode."""
+    seed, trials, max_steps = 1, 3, 300
+    out = tmp_path / "out"
+    moved = ["--namespace", namespace] if namespace else []
+    run = start_external_run(ros_env, ["--seed", str(seed), "--trials", str(trials),
+                                       "--max-steps", str(max_steps), "--stall-timeout", "20",
+                                       "--out", str(out), *moved], tmp_path / "run_all.err")
+    environment = None
+    try:
+        stdout = Lines(run.stdout)
+        waiting = stdout.wait_for(WAITING, timeout=60)
+        assert f"in namespace /{namespace or ''} " in waiting, waiting
+        time.sleep(3.0)  # the rest of the graph starts meanwhile, and waits
+        remaps = ["-r", f"__ns:=/{namespace}", "-r", f"/clock:=/{namespace}/clock"] \
+            if namespace else []
+        environment = subprocess.Popen(
+            [PY, "-m", "clnn_ros.nodes.environment", "--ros-args", "-p", f"seed:={seed}",
+             "-p", f"trials:={trials}", "-p", f"max_steps:={max_steps}",
+             "-p", "extra_nodes:=recorder", "--log-level", "warn", *remaps],
+            cwd=ROOT, env=ros_env, stdin=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        status = run.wait(timeout=180)
+        stderr = (tmp_path / "run_all.err").read_text()
+        assert status == 0, stderr
+        assert stdout.wait_for("run_all: completed:", timeout=10), stdout.text()
+        # the environment ends by itself on EPISODE_END
+        assert environment.wait(timeout=20) == 0, environment.stderr.read()
+    finally:
+        end(run, environment)
+    core = run_episode(seed, Params(trials=trials, max_steps=max_steps))
+    with open(out / "trials.csv") as f:
+        assert [int(r["steps"]) for r in csv.DictReader(f)] == core.steps.tolist()
+    np.testing.assert_array_equal(np.load(out / "final_weights.npy"), core.final_weights)
+    assert (out / "run.mcap").stat().st_size > 0
+
+
+def test_external_environment_that_never_comes(ros_env, tmp_path):
+    """No environment node: run_all exits 1 within the stall timeout (counted once the rest of
+    the graph is ready) plus a margin, with one error line that names the environment."""
+    stall_timeout, margin = 3.0, 30.0
+    started = time.monotonic()
+    run = start_external_run(ros_env, ["--stall-timeout", str(stall_timeout), "--no-record",
+                                       "--trials", "2", "--max-steps", "100"],
+                             tmp_path / "run_all.err")
+    try:
+        Lines(run.stdout).wait_for(WAITING, timeout=60)
+        waiting_at = time.monotonic()
+        try:
+            status = run.wait(timeout=stall_timeout + margin)
+        except subprocess.TimeoutExpired:
+            status = None
+    finally:
+        end(run)
+    ended_at = time.monotonic()
+    stderr = (tmp_path / "run_all.err").read_text()
+    assert status is not None, \
+        f"still running {ended_at - waiting_at:.1f} s after the waiting line " \
+        f"({ended_at - started:.1f} s in all): {stderr}"
+    assert status == 1, stderr
+    errors = [line for line in stderr.splitlines() if line.startswith("run_all: error:")]
+    assert len(errors) == 1, stderr
+    assert "environment" in errors[0] and f"{stall_timeout:g} s" in errors[0], errors[0]

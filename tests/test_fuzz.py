@@ -1,8 +1,8 @@
-"""The graph under fuzz (scripts/fuzz_graph.py): 1,000 malformed or hostile messages on each of
-the seven input topics while an episode runs (5 processes, and composed). Every subscriber
-refuses every one of them, each with a logged reason of the expected kind (its content, or a
-sender that is not the topic's publisher), no real message is refused, and the episode equals
-the core's bit for bit."""
+"""The graph under fuzz (scripts/fuzz_graph.py): 1,000 malformed or well-formed but impossible
+messages (stale, far ahead, another graph's) on each of the seven input topics while an episode
+runs (5 processes, and composed). Every subscriber refuses every one of them, for the expected
+reason (its content, or its tick), no real message is refused (each node's refusal summary
+holds exactly the fuzz), and the episode equals the core's bit for bit."""
 
 from __future__ import annotations
 
@@ -23,18 +23,26 @@ from clnn_ros.core.params import Params
 
 DOMAIN_ID = str(90 + os.getpid() % 10)
 FUZZER = Path(__file__).parents[1] / "scripts" / "fuzz_graph.py"
-# GraphNode.refuse: "[ERROR] [<time>] [<node>]: refused <topic> tick <tick>: <reason>"
-REFUSAL = re.compile(r"\[(\w+)\]: refused (\S+) tick \S+: (.*)$")
-UNKNOWN_PUBLISHER = "from an unknown publisher"
-WELL_FORMED = {"wrong_tick", "duplicate_tick", "reordered_tick", "hostile_next_tick"}
+# GraphNode.refusal_summary, logged once at exit:
+# "[WARN] [<time>] [<node>]: refused N messages: <topic> (<kind>) <count>, ..."
+SUMMARY = re.compile(r"\[WARN\] \[[^]]*\] \[([\w.]+)\]: refused (\d+) messages: (.*)$")
+PART = re.compile(r"(\S+) \((content|tick)\) (\d+)")
+WELL_FORMED = {"stale_tick", "far_tick", "foreign_graph"}
 
 
-def refusals(stderr: str) -> Counter:
-    """(node, topic, "publisher" or "content"): refusals logged."""
-    counts = Counter()
-    for match in filter(None, map(REFUSAL.search, stderr.splitlines())):
-        node, topic, reason = match.groups()
-        counts[node, topic, "publisher" if UNKNOWN_PUBLISHER in reason else "content"] += 1
+def refusal_summaries(stderr: str) -> Counter:
+    """(node, topic, "content" or "tick"): count, from the nodes' refusal summaries (one per
+    node at most)."""
+    counts, nodes = Counter(), []
+    for match in filter(None, map(SUMMARY.search, stderr.splitlines())):
+        node, total, parts = match.groups()
+        nodes.append(node)
+        found = [PART.fullmatch(part) for part in parts.split(", ")]
+        assert all(found), match.group(0)
+        for topic, kind, count in (part.groups() for part in found):
+            counts[node, topic, kind] += int(count)
+        assert sum(int(part.group(3)) for part in found) == int(total), match.group(0)
+    assert len(nodes) == len(set(nodes)), f"more than one summary of a node: {sorted(nodes)}"
     return counts
 
 
@@ -42,17 +50,19 @@ def refusals(stderr: str) -> Counter:
 def test_every_fuzz_message_is_refused_and_the_episode_equals_the_core(tmp_path, composed):
     env = {**os.environ, "ROS_DOMAIN_ID": DOMAIN_ID, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
            "ROS_LOG_DIR": str(tmp_path / "ros_log")}
-    seed, trials, max_steps, per_topic = 2, 16, 1500, 1000
+    seed, trials, max_steps, per_topic = 2, 20, 1500, 1000
     report_path, graph_log = tmp_path / "fuzz.json", tmp_path / "graph_stderr.txt"
     # The fuzzer starts first and waits for the graph (a participant that joins a running
-    # graph late is discovered late); on every tick it sees it sends 10 messages per topic
-    # (it sees only some ticks of a composed graph: 1,000 per topic must fit in the episode).
+    # graph late is discovered late); on every tick it sees it sends 10 messages per topic, so
+    # it needs 100 ticks. It may discover the graph late (with clnn_ros/fastdds_profile.xml
+    # it saw the first clock up to 2.4 s, 8,200 ticks, into a composed episode, likely at Fast
+    # DDS's next participant announcement): 20 trials (16,930 ticks) leave room for that.
     fuzzer = subprocess.Popen(
         [sys.executable, str(FUZZER), "--seed", "7", "--per-topic", str(per_topic),
          "--per-tick", "10", "--max-steps", str(max_steps), "--report", str(report_path)],
         env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        with open(graph_log, "w") as stderr:  # 15,000 refusal lines: a file, not a pipe
+        with open(graph_log, "w") as stderr:  # throttled refusal lines and the summaries
             graph = subprocess.run(
                 [sys.executable, "-m", "clnn_ros.run_all", "--quiet", "--no-record", "--seed",
                  str(seed), "--trials", str(trials), "--max-steps", str(max_steps), "--out",
@@ -64,15 +74,17 @@ def test_every_fuzz_message_is_refused_and_the_episode_equals_the_core(tmp_path,
     assert fuzzer.returncode == 0, fuzz_errors
     logged = graph_log.read_text()
     assert graph.returncode == 0, logged[-2000:]
+    assert "did not exit" not in logged, logged[-2000:]  # each node took the real EPISODE_END
     report = json.loads(report_path.read_text())
 
     for topic, sent in report["sent"].items():
         assert sum(sent.values()) == per_topic, topic
-        assert WELL_FORMED < set(sent) and len(set(sent) - WELL_FORMED) >= 2, sorted(sent)
+        assert WELL_FORMED <= set(sent) and len(set(sent) - WELL_FORMED) >= 2, sorted(sent)
     expected = Counter({(node, topic, kind): count
                         for topic, nodes in report["subscribers"].items() for node in nodes
                         for kind, count in report["refusals_per_subscriber"][topic].items()})
-    assert refusals(logged) == expected  # each one, by each subscriber, and nothing else
+    assert sum(expected.values()) == 15 * per_topic  # the 15 subscriptions of the 7 topics
+    assert refusal_summaries(logged) == expected  # each one, by each subscriber, nothing else
 
     core = run_episode(seed, Params(trials=trials, max_steps=max_steps))
     with open(tmp_path / "trials.csv") as f:

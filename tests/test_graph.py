@@ -17,12 +17,11 @@ import pytest
 
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
-from clnn_ros.rosenv import (fast_dds_shm_files, processes_with_env,
-                             remove_unused_fast_dds_files, shm_files_in_use)
+from clnn_ros.rosenv import fast_dds_shm_files, processes_with_env, shm_files_in_use
 
-from conftest import ros_environment
+from conftest import free_domain_id, ros_environment
 
-DOMAIN_ID = str(100 + os.getpid() % 50)
+DOMAIN_ID = free_domain_id()
 
 
 @pytest.fixture(scope="module")
@@ -57,15 +56,17 @@ def test_graph_equals_core(ros_env, tmp_path, composed, nsv, options):
     assert "completed: 10 trials" in result.stdout
 
 
-def test_ctrl_c_stops_everything(ros_env, tmp_path):
+def test_ctrl_c_stops_everything(ros_env, tmp_path, in_private_shm):
     """Ctrl-C in a terminal: run_all and every node exit, none is left, and no Fast DDS shared
-    memory is left (a file of this run left over is new and used by no process)."""
-    marker = {**ros_env, "CLNN_TEST_RUN": str(tmp_path)}
-    remove_unused_fast_dds_files()  # stale ones of killed processes would mix with this run's
+    memory is left. Where allowed the run has a /dev/shm of its own (other DDS users of the
+    machine cannot mix their files in), listed after run_all exited."""
+    marker = {**ros_env, "CLNN_TEST_RUN": str(tmp_path), "LISTING": str(tmp_path / "shm.txt")}
+    list_after = ["sh", "-c", 'trap true INT; "$@"; code=$?; ls /dev/shm > "$LISTING"; '
+                              'exit $code', "_"]
     shm_before = fast_dds_shm_files()
     process = subprocess.Popen(
-        [sys.executable, "-m", "clnn_ros.run_all", "--seed", "1", "--trials", "400",
-         "--out", str(tmp_path)],
+        [*in_private_shm, *list_after, sys.executable, "-m", "clnn_ros.run_all", "--seed", "1",
+         "--trials", "400", "--out", str(tmp_path)],
         env=marker, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         start_new_session=True)
     wait_for_line(process.stdout, "trial    2/")
@@ -73,7 +74,10 @@ def test_ctrl_c_stops_everything(ros_env, tmp_path):
     stdout, stderr = process.communicate(timeout=30)
     assert process.returncode == 130, stderr
     assert "run_all: interrupted" in stderr and "Traceback" not in stderr
-    left = (fast_dds_shm_files() - shm_before) - shm_files_in_use()
+    if in_private_shm:
+        left = {name for name in (tmp_path / "shm.txt").read_text().split() if "fastrtps" in name}
+    else:  # a file of this run left over is new and used by no process
+        left = (fast_dds_shm_files() - shm_before) - shm_files_in_use()
     assert not left, sorted(left)
     assert not processes_with(marker["CLNN_TEST_RUN"])
 

@@ -25,13 +25,15 @@ import pytest
 from clnn_ros import bag
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
-from clnn_ros.nodes.common import STATE
+from clnn_ros.names import STATE
 from clnn_ros.two_hosts import veth_link
 
 from test_graph import processes_with, read_steps, wait_for_line
 from test_recording import assert_every_tick, raw_messages
 
-DOMAIN_IDS = [str(70 + os.getpid() % 10 * 2 + i) for i in (0, 1)]  # two ids within 70-89
+from conftest import free_domain_id
+
+DOMAIN_IDS = [free_domain_id(), free_domain_id()]
 TRIALS, MAX_STEPS = 8, 1500
 RUN_TIMEOUT_S = 120
 

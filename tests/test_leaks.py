@@ -9,7 +9,9 @@ import sys
 from pathlib import Path
 
 SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "leak_check.py"
-DOMAIN_ID = str(20 + os.getpid() % 10)
+from conftest import free_domain_id
+
+DOMAIN_ID = free_domain_id()
 
 
 def test_twenty_runs_leave_nothing(tmp_path, in_private_shm):

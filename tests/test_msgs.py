@@ -16,6 +16,8 @@ from pathlib import Path
 
 import pytest
 import rclpy
+
+from conftest import free_domain_id
 from builtin_interfaces.msg import Time
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -33,7 +35,7 @@ from clnn_ros_msgs.msg import (
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
                  durability=DurabilityPolicy.VOLATILE)
 # Domains 0..232 work with Fast DDS; keep this module's in its own slice of them.
-DOMAIN_ID = 200 + os.getpid() % 30
+DOMAIN_ID = int(free_domain_id())
 
 
 @pytest.fixture(scope="module", autouse=True)

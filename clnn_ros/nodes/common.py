@@ -174,9 +174,23 @@ class GraphNode(Node):
         msg.tick, msg.trial = tick, trial
         return msg
 
+    def current_tick(self) -> int:
+        """The tick whose inputs the node waits for: its TickJoin's (the environment's own)."""
+        return self.join.tick
+
     def on_trial_event(self, event: TrialEvent) -> None:
+        """EPISODE_END(e) ends the node. The trial manager sends it with e the tick it waits
+        for (it holds all of tick e-1) or the tick it just completed (the episode's last), and
+        no clock follows it: the node has finished tick e-1 and cannot finish tick e+1, so its
+        current tick is e or e+1. Any other tick is refused (a stale or forged end, another
+        graph's). START and END change nothing here (the environment checks START)."""
         if event.event == TrialEvent.EPISODE_END:
-            self.finish(0)
+            tick = self.current_tick()
+            if event.tick not in (tick - 1, tick):
+                self.refuse(TRIAL_EVENT, event, f"EPISODE_END expected at tick {tick - 1} or "
+                                                f"{tick}")
+            else:
+                self.finish(0)
 
     def interrupted(self) -> None:
         """Called once after Ctrl-C or SIGTERM, before the node is destroyed."""
@@ -221,7 +235,7 @@ def ros_session(argv: list[str] | None = None) -> Iterator[list[int]]:
     """rclpy for one process: SIGINT and SIGTERM are recorded (catch_signals) instead of being
     handled by rclpy, and rclpy is shut down on the way out. Yields the signals received."""
     signals = catch_signals()
-    init_rclpy(sys.argv if argv is None else argv)
+    init_ros(sys.argv if argv is None else argv)
     try:
         yield signals
     finally:
@@ -231,7 +245,7 @@ def ros_session(argv: list[str] | None = None) -> Iterator[list[int]]:
 ROS_ARGS_USAGE = "expected --ros-args [-p name:=value] [--params-file FILE] [--log-level LEVEL]"
 
 
-def init_rclpy(argv: list[str]) -> None:
+def init_ros(argv: list[str]) -> None:
     """rclpy.init with SIGINT/SIGTERM left to catch_signals. ROS arguments that rcl refuses (a
     bad -p rule, an unknown argument, a params file it cannot parse or that holds no
     parameters) end the process with one line `<prog>: error: ...` and exit status 2."""

@@ -42,6 +42,9 @@ class EnvironmentNode(GraphNode):
             return
         self._offer(CLOCK, clock)
 
+    def current_tick(self) -> int:
+        return self.tick
+
     def on_trial_event(self, event: TrialEvent) -> None:
         super().on_trial_event(event)
         if event.event != TrialEvent.START:

@@ -39,7 +39,7 @@ from clnn_ros_msgs.msg import TrialEvent
 from .. import bag
 from ..core.params import ParamError, Params
 from ..files import describe_write_error
-from ..names import PER_TICK, READY, RECORDED, RECORDER, TRIAL_EVENT
+from ..names import CLOCK, PER_TICK, READY, RECORDED, RECORDER, TRIAL_EVENT
 from .common import PROGRESS_QOS, READY_QOS, ros_session, spin_until_finished, steady_clock
 from .parameters import declare_parameters
 
@@ -138,10 +138,16 @@ class RecorderNode(Node):
             if self.first_ns is None:
                 self.first_ns = now
             self.last_ns = now
-            if topic == TRIAL_EVENT and self.episode_end_at is None and \
-                    deserialize_message(data, TrialEvent).event == TrialEvent.EPISODE_END:
+            if topic == TRIAL_EVENT and self.episode_end_at is None and self.ends_episode(data):
                 self.episode_end_at = time.monotonic()
         return receive
+
+    def ends_episode(self, data: bytes) -> bool:
+        """An EPISODE_END of this graph's clock: its tick is the last clock's or the next (a
+        stale one, or another graph's, records like any message but ends nothing)."""
+        event = deserialize_message(data, TrialEvent)
+        clock = self.last_tick.get(CLOCK, 0) // self.tau_ns if self.tau_ns else 0
+        return event.event == TrialEvent.EPISODE_END and clock <= event.tick <= clock + 1
 
     def _poll(self) -> None:
         """Announce readiness once every subscription sees its publisher; report progress;

@@ -39,7 +39,8 @@ from std_msgs.msg import String, UInt64
 
 from ..core.episode import seed_setup, start_from_setting
 from ..files import describe_write_error, write_atomically, write_text_atomically
-from ..names import (ACTION, CLOCK, GRAPH_NODES, PUBLISHED_BY, READY, RECORDED, RECORDER, REWARD,
+from ..names import (ACTION, CLOCK, GRAPH_NODES, NOT_STARTED, PUBLISHED_BY, READY, RECORDED,
+                     RECORDER, REWARD,
                      SPIKES, STATE, TRIAL_EVENT, TRIAL_MANAGER, WEIGHTS)
 from .common import (PROGRESS_QOS, READY_QOS, RECORDER_WINDOW, GraphNode, TickJoin, node_main,
                      steady_clock)
@@ -47,7 +48,9 @@ from .parameters import names_list
 
 WATCHDOG_S = 0.1
 GRAPH_CHECK_S = 0.5  # how often the ROS graph is looked at for nodes that left it
-DISCOVERY_S = 1.0  # the least time before the first tick: another graph is discovered by then
+# The least time before the first tick: another graph of the same names is discovered by then
+# (a new participant sees a running one after 0.1-2.8 s here).
+DISCOVERY_S = 3.0
 WAITING_NOTE_S = 10.0  # while the graph is not ready, a note of what it waits for this often
 # Who publishes what within a tick, in causal order: the first one missing went silent.
 CHAIN = (STATE, SPIKES, REWARD, ACTION)
@@ -80,6 +83,7 @@ class TrialManagerNode(GraphNode):
         self.externals_awaited_since = None
         self.last_note = self.last_graph_check = self.last_check = time.monotonic()
         self.stalled_s = 0.0  # running time of this node without progress
+        self.not_started = False  # another graph of the same names runs
         self.exit_reason = ""
         self.join = TickJoin(self, (STATE, ACTION), self.on_tick)
         self.current = {topic: -1 for topic in CHAIN}  # the last tick each topic gave
@@ -157,7 +161,7 @@ class TrialManagerNode(GraphNode):
         if now - self.last_graph_check >= GRAPH_CHECK_S:
             self.last_graph_check = now
             if problem := self.graph_problem():
-                self.stop(1, problem)
+                self.stop(NOT_STARTED if self.not_started else 1, problem)
                 return
         if self.started_at is None:
             self.check_start(now, running)
@@ -174,6 +178,7 @@ class TrialManagerNode(GraphNode):
         if self.started_at is None:
             twice = sorted(n for n in self.expected | {TRIAL_MANAGER} if present[n] > 1)
             if twice:
+                self.not_started = True
                 return (f"another graph runs in namespace {namespace} on ROS domain "
                         f"{os.environ.get('ROS_DOMAIN_ID', '0') or '0'}: two nodes named "
                         f"{', '.join(twice)} (give each graph its own --namespace or "
