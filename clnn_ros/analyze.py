@@ -30,7 +30,7 @@ from .bag import TOPIC_TYPES, BagError, Decoder, iter_raw, open_bag
 from .cli import OneLineArgumentParser
 from .core.params import ParamError, Params, params_from_strings
 from .names import (ACTION, CLOCK, REWARD, RUN_SETTINGS, SPIKES, STATE, TRIAL_EVENT,
-                    WEIGHTS)
+                    WEIGHTS, absolute)
 
 TRIALS_HEADER = ["seed", "trial", "initial_angle_deg", "steps", "end_reason"]
 START, END, EPISODE_END = 0, 1, 2
@@ -82,7 +82,9 @@ def read_bag(path: Path, salvage: bool):
         raw = {STATE: {}, SPIKES: {}, ACTION: {}}
         schemas = {}
         counts = {topic: 0 for topic in TOPIC_TYPES}
-        for schema, topic, publish_ns, _log_ns, data in iter_raw(reader):
+        recorded_as = {}  # relative name: the name in the bag (its namespace)
+        for schema, topic, publish_ns, _log_ns, data, name in iter_raw(reader):
+            recorded_as[topic] = name
             counts[topic] = counts.get(topic, 0) + 1
             if topic == TRIAL_EVENT:
                 events.append(decode(schema, data))
@@ -95,7 +97,7 @@ def read_bag(path: Path, salvage: bool):
                     raw[topic][tick] = data
                     schemas[topic] = schema
     return dict(params=params, given=given, events=events, weights=weights, ticks=ticks, raw=raw,
-                schemas=schemas, counts=counts, decode=decode)
+                schemas=schemas, counts=counts, decode=decode, recorded_as=recorded_as)
 
 
 def trial_rows(events) -> list[list]:
@@ -287,7 +289,8 @@ def summary_markdown(bag_path: Path, result: dict, salvage: bool) -> str:
             span = f"{first}-{last}" if first >= 0 else "-"
         else:
             span, missing = "-", "-"
-        lines.append(f"| `{topic}` | `{type_name}` | {data['counts'].get(topic, 0):,} | {span} "
+        name = data["recorded_as"].get(topic, absolute(topic))
+        lines.append(f"| `{name}` | `{type_name}` | {data['counts'].get(topic, 0):,} | {span} "
                      f"| {missing} |")
     if rows:
         lines += ["", "## Trials", "", "| trial | initial angle (deg) | steps | end |",

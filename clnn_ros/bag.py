@@ -197,15 +197,17 @@ def open_bag(path, salvage: bool = False):
 
 
 def iter_raw(reader, topics=None):
-    """(schema, topic, publish_time, log_time, cdr bytes) of the bag's messages in file order,
-    the graph's topics by their relative names (a run in a namespace reads as any other); a
+    """(schema, topic, publish_time, log_time, cdr bytes, recorded topic name) of the bag's
+    messages in file order, the graph's topics by their relative names (a run in a namespace
+    reads as any other: "/robot1/clock" is "clock"); a
     salvaged (truncated) file ends quietly at its last complete record."""
     from mcap.exceptions import McapError
     from mcap.reader import NonSeekingReader
     try:
         for schema, channel, message in reader.iter_messages(topics=topics,
                                                              log_time_order=False):
-            yield schema, graph_topic(channel.topic), message.publish_time, message.log_time, message.data
+            yield (schema, graph_topic(channel.topic), message.publish_time, message.log_time,
+                   message.data, channel.topic)
     except (McapError, EOFError, struct.error, ValueError) as error:
         if not isinstance(reader, NonSeekingReader):
             raise BagError(f"damaged MCAP: {error}") from None

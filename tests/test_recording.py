@@ -106,8 +106,8 @@ def test_bag_layout_is_rosbag2(recorded):
         assert reader.get_header().profile == "ros2"
         summary = reader.get_summary()
         metadata = {m.name: m.metadata for m in reader.iter_metadata()}
-    channels = {c.topic: c for c in summary.channels.values()}
-    assert set(channels) == set(bag.TOPIC_TYPES)
+    channels = {names.graph_topic(c.topic): c for c in summary.channels.values()}
+    assert {c.topic for c in channels.values()} == {names.absolute(t) for t in bag.TOPIC_TYPES}
     for topic, type_name in bag.TOPIC_TYPES.items():
         channel = channels[topic]
         schema = summary.schemas[channel.schema_id]
@@ -171,20 +171,21 @@ def test_two_independent_readers_decode_every_field(recorded):
     raw = {}  # (topic, sequence) -> CDR; the recorder numbers each topic's messages 0, 1, ...
     with open(path, "rb") as f:
         for _, channel, message in make_reader(f).iter_messages():
-            raw[(channel.topic, message.sequence)] = message.data
+            raw[(names.graph_topic(channel.topic), message.sequence)] = message.data
             assert message.publish_time == bag.stamp_ns(message.data)
     by_mcap = {}
     for m in read_ros2_messages(path):
-        key = (m.channel.topic, m.sequence_count)
+        key = (names.graph_topic(m.channel.topic), m.sequence_count)
         if key[1] % 97 == 3 or key[0] in (names.TRIAL_EVENT, names.WEIGHTS):
             by_mcap[key] = fields_of(m.ros_msg)
     by_rosbags = {}
     seen = {}
     with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
         for connection, _, data in reader.messages():
-            index = seen[connection.topic] = seen.get(connection.topic, -1) + 1
-            if (connection.topic, index) in by_mcap:
-                by_rosbags[(connection.topic, index)] = fields_of(
+            topic = names.graph_topic(connection.topic)
+            index = seen[topic] = seen.get(topic, -1) + 1
+            if (topic, index) in by_mcap:
+                by_rosbags[(topic, index)] = fields_of(
                     reader.deserialize(data, connection.msgtype))
     assert set(by_rosbags) == set(by_mcap)
     assert {t for t, _ in by_mcap} == set(bag.TOPIC_TYPES)
@@ -225,9 +226,15 @@ def test_echo_topics_then_ctrl_c_leaves_a_complete_bag(ros_env, tmp_path):
     wait_for_line(process.stdout, "trial    3/")
     listed = tool(ros_env, "clnn_ros.topics")
     assert listed.returncode == 0
-    for topic, type_name in bag.TOPIC_TYPES.items():
-        assert f"{topic} [{type_name}]" in listed.stdout.splitlines()
-    state = tool(ros_env, "clnn_ros.echo", STATE, "--once")
+    # The model's topics, and ROS's own: the plumbing is hidden (names with a part "_...").
+    assert sorted(listed.stdout.splitlines()) == sorted(
+        [f"{names.absolute(topic)} [{type_name}]" for topic, type_name in bag.TOPIC_TYPES.items()]
+        + ["/parameter_events [rcl_interfaces/msg/ParameterEvent]",
+           "/rosout [rcl_interfaces/msg/Log]"])
+    hidden = tool(ros_env, "clnn_ros.topics", "--include-hidden-topics")
+    assert {"/_graph/ready [std_msgs/msg/String]", "/_recorder/progress [std_msgs/msg/UInt64]"} \
+        <= set(hidden.stdout.splitlines())
+    state = tool(ros_env, "clnn_ros.echo", names.absolute(STATE), "--once")
     assert state.returncode == 0 and state.stdout.endswith("\n---\n")
     fields = yaml.safe_load(state.stdout.split("---")[0])
     assert list(fields) == ["header", "tick", "trial", "cart_position_m", "cart_velocity_m_per_s",
@@ -325,8 +332,9 @@ def test_sample_bag_analysis(tmp_path):
         (tmp_path / "summary.md").read_text()
 
 
-def test_sigterm_finishes_the_bag(ros_env, tmp_path):
-    """A recorder alone (no graph yet) told to stop with SIGTERM writes a finished file."""
+def test_sigterm_stops_a_recorder_that_recorded_nothing(ros_env, tmp_path):
+    """A recorder alone (no graph yet) told to stop with SIGTERM: a clean exit, and no bag,
+    since nothing was recorded."""
     path = tmp_path / "alone.mcap"
     process = subprocess.Popen([sys.executable, "-m", "clnn_ros.nodes.recorder", "--ros-args",
                                 "-p", f"bag_path:={path}"], env=ros_env, stdout=subprocess.PIPE,
@@ -336,11 +344,9 @@ def test_sigterm_finishes_the_bag(ros_env, tmp_path):
         time.sleep(0.05)
     time.sleep(0.5)
     process.send_signal(signal.SIGTERM)
-    _, stderr = process.communicate(timeout=20)
+    stdout, stderr = process.communicate(timeout=20)
     assert process.returncode == 143 and "Traceback" not in stderr, stderr
-    reader, stream = bag.open_bag(path)
-    with stream:
-        assert {c.topic for c in reader.get_summary().channels.values()} == set(bag.TOPIC_TYPES)
+    assert f"recorder: nothing recorded: {path} removed" in stdout and not path.exists()
     missing = subprocess.run([sys.executable, "-m", "clnn_ros.nodes.recorder"], env=ros_env,
                              capture_output=True, text=True, timeout=20)
     assert missing.returncode == 2 and "bag_path is not set" in missing.stderr
