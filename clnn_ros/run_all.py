@@ -274,8 +274,9 @@ def warn_forced(names: list[str]) -> None:
 
 
 def run_composed(values: dict, environment: str | None, namespace: str,
-                 interrupted: list[int]) -> int:
-    """All nodes in this process on one executor."""
+                 interrupted: list[int]) -> tuple[int, str | None]:
+    """All nodes in this process on one executor. Returns the trial manager's exit status (or
+    128 + signal) and its reason."""
     import importlib
     from .nodes.agent import AgentNode
     from .nodes.common import init_ros, spin_until_finished
@@ -299,8 +300,8 @@ def run_composed(values: dict, environment: str | None, namespace: str,
         if interrupted:
             for node in nodes:
                 node.interrupted()
-            return 128 + interrupted[0]
-        return nodes[-1].finished.result()
+            return 128 + interrupted[0], None
+        return nodes[-1].finished.result(), nodes[-1].exit_reason
     finally:
         for node in nodes:
             node.destroy_node()
@@ -406,10 +407,11 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
                   f"rest is ready)", flush=True)
         failed = False
         if args.composed:
-            status = run_composed(values, environment, namespace, interrupted)
+            status, reason = run_composed(values, environment, namespace, interrupted)
         else:
             status, failed = run_separate(supervisor, values, Path(tmp), env_command,
                                           namespace, interrupted)
+            reason = supervisor.children[TRIAL_MANAGER].own_error()
         if bag_path is not None:
             recorder = supervisor.children[RECORDER]
             if not failed and not interrupted and recorder.returncode not in (None, 0):
@@ -440,7 +442,8 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
     if status == NOT_STARTED and bag_path is not None:
         bag_path.unlink(missing_ok=True)  # what it holds is another graph's
     if status != 0:
-        reason = summary.get("exit_reason") or f"the trial manager exited with status {status}"
+        reason = summary.get("exit_reason") or reason or \
+            f"the trial manager exited with status {status}"
         print(f"run_all: error: {reason}", file=sys.stderr)
         return 1
     return 0

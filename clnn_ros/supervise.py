@@ -58,12 +58,16 @@ class Child:
     def describe_exit(self) -> str:
         """'node 'x' exited with status 3' / 'died (SIGKILL)', or the child's own last error
         line first ('disk full writing F (node 'recorder' exited with status 1)')."""
-        self._reader.join(timeout=1.0)  # its last lines
         code = self.process.returncode
         how = f"exited with status {code}" if code >= 0 else \
             f"died ({signal.Signals(-code).name})"
-        own = next((m.group(1) for m in map(OWN_ERROR.match, reversed(self.tail)) if m), None)
+        own = self.own_error()
         return f"{own} (node '{self.name}' {how})" if own else f"node '{self.name}' {how}"
+
+    def own_error(self) -> str | None:
+        """The message of the child's last error line, if it wrote one."""
+        self._reader.join(timeout=1.0)  # its last lines
+        return next((m.group(1) for m in map(OWN_ERROR.match, reversed(self.tail)) if m), None)
 
     def last_lines(self) -> list[str]:
         return list(self.tail)

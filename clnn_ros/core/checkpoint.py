@@ -69,10 +69,15 @@ def save_checkpoint(path: str | os.PathLike, checkpoint: Checkpoint) -> Path:
     arrays = {f"agent_{name}": value for name, value in checkpoint.agent.items()}
     scalars = {name: np.int64(getattr(checkpoint, name)) for name in SCALARS}
     partial = path.with_name(path.name + ".partial")
-    with open(partial, "wb") as f:
-        np.savez(f, format=FORMAT, format_version=FORMAT_VERSION, params_json=json.dumps(params),
-                 **scalars, **arrays)
-    os.replace(partial, path)
+    try:
+        with open(partial, "wb") as f:
+            np.savez(f, format=FORMAT, format_version=FORMAT_VERSION,
+                     params_json=json.dumps(params), **scalars, **arrays)
+        os.replace(partial, path)
+    except OSError as error:  # a full disk: the previous checkpoint stays, named in the error
+        partial.unlink(missing_ok=True)
+        error.filename = error.filename or str(path)
+        raise
     return path
 
 

@@ -18,6 +18,7 @@ from std_srvs.srv import Trigger
 from ..core.checkpoint import capture, save_checkpoint
 from ..core.episode import start_from_setting
 from ..core.rln import REWARD_KINDS
+from ..files import describe_write_error
 from ..names import ACTION, REWARD, SAVE_CHECKPOINT, SPIKES, WEIGHTS
 from .common import GraphNode, TickJoin, node_main
 
@@ -63,7 +64,11 @@ class AgentNode(GraphNode):
             action.winning_neuron, action.winning_segment = neuron, segment
         self.action_pub.publish(self.stamp(action, reward.tick, reward.trial))
         if reward.trial_over:
-            self.save("checkpoint.npz")  # before the weights: on disk when the episode ends
+            try:
+                self.save("checkpoint.npz")  # before the weights: on disk when the episode ends
+            except OSError as error:
+                self.fail(describe_write_error(error))
+                return
             w = self.agent.weights
             self.weights_pub.publish(self.stamp(WeightSnapshot(
                 neurons=w.shape[0], segments=w.shape[1], inputs=w.shape[2],
@@ -88,7 +93,7 @@ class AgentNode(GraphNode):
         try:
             path = self.save(f"checkpoint_{self.last_tick}.npz")
         except OSError as error:
-            path, response.message = None, f"cannot write the checkpoint: {error}"
+            path, response.message = None, describe_write_error(error)
         else:
             response.message = str(path) if path else "no out_dir set: nowhere to save"
         response.success = path is not None

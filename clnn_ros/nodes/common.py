@@ -31,7 +31,6 @@ from std_msgs.msg import String
 from clnn_ros_msgs.msg import TrialEvent
 
 from ..core.params import ParamError, Params
-from ..files import describe_write_error
 from ..names import (ACTION, CLOCK, READY, REWARD, SPIKES, STATE, TRIAL_EVENT, WEIGHTS)
 from .parameters import declare_parameters, names_list, read_params_file
 from .validate import (action_problem, clock_problem, event_problem, reward_problem,
@@ -93,6 +92,7 @@ class GraphNode(Node):
             self.set_parameters([Parameter("use_sim_time", Parameter.Type.BOOL, True)])
         self.tau_ns = round(self.params.tau * 1e9)
         self.extra_nodes = names_list(self.settings["extra_nodes"])
+        self.failure = None  # why the node failed (fail)
         self.refusals = {}  # (topic, "content" or "tick"): count
         self._unlogged = {}  # topic: [refusals not logged yet, when the last line was logged]
         self.finished = Future()
@@ -199,6 +199,13 @@ class GraphNode(Node):
         if not self.finished.done():
             self.finished.set_result(exit_code)
 
+    def fail(self, reason: str) -> None:
+        """Stop the node with exit status 1 and one line `<prog>: error: <reason>` (a file it
+        cannot write); its process ends, and run_all names it."""
+        self.failure = reason
+        self.get_logger().error(reason)
+        self.finish(1)
+
 
 def make_executor(context=None):
     """rclpy's EventsExecutor, the fastest executor measured here (docs/ROS_GRAPH.md,
@@ -302,8 +309,8 @@ def spin_until_finished(nodes: list[Node], finished: Future, signals: list[int])
 
 def node_main(factory: Callable[[], GraphNode], argv: list[str] | None = None) -> int:
     """Run one node in its own process until the episode ends; returns the exit status.
-    Bad parameters: one error line, exit 2. A file it cannot write (a full disk): one line,
-    exit 1. SIGINT/SIGTERM: clean shutdown, 130/143."""
+    Bad parameters: one error line, exit 2. A node that failed (GraphNode.fail: a full disk):
+    one line, exit 1. SIGINT/SIGTERM: clean shutdown, 130/143."""
     argv = sys.argv if argv is None else argv
     prog = os.path.basename(argv[0])
     unexpected = split_ros_arguments(argv)[1][1:]
@@ -322,10 +329,9 @@ def node_main(factory: Callable[[], GraphNode], argv: list[str] | None = None) -
             if signals:
                 node.interrupted()
                 return 128 + signals[0]
+            if node.failure:
+                print(f"{prog}: error: {node.failure}", file=sys.stderr, flush=True)
             return node.finished.result()
-        except OSError as error:
-            print(f"{prog}: error: {describe_write_error(error)}", file=sys.stderr, flush=True)
-            return 1
         finally:
             node.destroy_node()
 

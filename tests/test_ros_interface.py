@@ -1,0 +1,139 @@
+"""What a ROS 2 user's own tools see of the graph, checked with rclpy alone (no ros2cli here):
+parameters through the standard parameter services (descriptions, ranges, read-only refusals,
+use_sim_time), namespaces (two graphs in two namespaces on one domain at once, each equal to its
+core episode), and a full disk (one line, the finished trials kept whole)."""
+
+from __future__ import annotations
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
+from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters
+
+from clnn_ros.core.episode import run_episode
+from clnn_ros.core.params import Params
+
+from test_graph import processes_with, read_steps
+from test_faults import error_lines
+
+from conftest import free_domain_id, ros_environment
+
+DOMAIN_ID = free_domain_id()
+
+
+@pytest.fixture(scope="module")
+def ros_env(tmp_path_factory):
+    return ros_environment(DOMAIN_ID, tmp_path_factory)
+
+
+def call(node, service_type, name: str, request, timeout: float = 20.0):
+    client = node.create_client(service_type, name)
+    assert client.wait_for_service(timeout_sec=timeout), f"no {name}"
+    future = client.call_async(request)
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    executor.spin_until_future_complete(future, timeout_sec=timeout)
+    executor.remove_node(node)
+    assert future.done(), f"{name} did not answer"
+    return future.result()
+
+
+@pytest.fixture
+def agent_by_hand(ros_env):
+    """An agent node started by hand (it waits for a graph that never comes) and a client."""
+    process = subprocess.Popen([sys.executable, "-m", "clnn_ros.nodes.agent", "--ros-args",
+                                "-p", "sigma:=128", "-p", "seed:=3"], env=ros_env,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=int(DOMAIN_ID))
+    node = rclpy.create_node("parameter_client", context=context)
+    try:
+        yield node
+    finally:
+        node.destroy_node()
+        context.try_shutdown()
+        process.send_signal(signal.SIGINT)
+        process.communicate(timeout=20)
+
+
+def test_a_read_only_parameter_is_refused_with_a_reason(agent_by_hand):
+    request = SetParameters.Request(parameters=[ParameterMsg(
+        name="sigma", value=ParameterValue(type=ParameterType.PARAMETER_INTEGER,
+                                           integer_value=-5))])
+    result = call(agent_by_hand, SetParameters, "/agent/set_parameters", request).results[0]
+    assert not result.successful and "read-only" in result.reason
+    values = call(agent_by_hand, GetParameters, "/agent/get_parameters",
+                  GetParameters.Request(names=["sigma", "use_sim_time", "seed"])).values
+    assert [values[0].integer_value, values[1].bool_value, values[2].integer_value] == \
+        [128, True, 3]  # unchanged; the node follows the graph's clock
+
+
+def test_parameters_describe_their_meaning_and_constraints(agent_by_hand):
+    names = ["sigma", "physics", "rho_plus", "seed", "stall_timeout_s"]
+    found = call(agent_by_hand, DescribeParameters, "/agent/describe_parameters",
+                 DescribeParameters.Request(names=names)).descriptors
+    described = dict(zip(names, found))
+    assert all(d.read_only and d.description for d in found)
+    assert described["sigma"].description.startswith("success window")
+    assert (described["sigma"].integer_range[0].from_value,
+            described["sigma"].integer_range[0].to_value) == (1, 2**31 - 1)
+    assert described["physics"].additional_constraints == "one of: paper, correct"
+    assert described["rho_plus"].floating_point_range[0].from_value == 0.0
+    assert described["seed"].integer_range[0].to_value == 2**32 - 1
+
+
+def test_two_graphs_in_two_namespaces_on_one_domain(ros_env, tmp_path):
+    """--namespace moves every node and topic: both episodes equal their core ones, and the
+    topics are under /a and /b."""
+    runs = {}
+    for name, seed in (("a", 1), ("b", 2)):
+        out = tmp_path / name
+        runs[name] = (out, seed, subprocess.Popen(
+            [sys.executable, "-m", "clnn_ros.run_all", "--quiet", "--namespace", name,
+             "--seed", str(seed), "--trials", "6", "--max-steps", "400", "--out", str(out)],
+            env={**ros_env, "CLNN_TEST_RUN": str(tmp_path)}, stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE, text=True))
+    listed = subprocess.run([sys.executable, "-m", "clnn_ros.topics", "--wait", "8"],
+                            env=ros_env, capture_output=True, text=True, timeout=30).stdout
+    for name, (out, seed, process) in runs.items():
+        _, stderr = process.communicate(timeout=180)
+        assert process.returncode == 0, stderr[-3000:]
+        assert read_steps(out) == run_episode(seed, Params(trials=6, max_steps=400)).steps.tolist()
+    topics = {line.split()[0] for line in listed.splitlines()}
+    assert {"/a/cartpole/state", "/b/cartpole/state", "/a/clock", "/b/rln/action"} <= topics
+    assert "/cartpole/state" not in topics
+    assert not processes_with(str(tmp_path))
+
+
+def test_a_full_disk_ends_the_run_with_one_line_and_keeps_the_finished_trials(ros_env, tmp_path):
+    """--out on a 200 KB tmpfs (a mount namespace of its own): the bag fills it; the run ends
+    with one line naming the disk and the file, and trials.csv holds every finished trial."""
+    full, kept = tmp_path / "full", tmp_path / "kept"
+    full.mkdir()
+    kept.mkdir()
+    script = ('mount -t tmpfs -o size=200k tmpfs "$FULL" || exit 99; "$@"; code=$?; '
+              'cp -r "$FULL/." "$KEPT/"; exit $code')
+    run = subprocess.run(
+        ["unshare", "--mount", "sh", "-c", script, "_", sys.executable, "-m",
+         "clnn_ros.run_all", "--seed", "0", "--trials", "20", "--out", str(full)],
+        env={**ros_env, "FULL": str(full), "KEPT": str(kept), "CLNN_TEST_RUN": str(tmp_path)},
+        capture_output=True, text=True, timeout=180)
+    if run.returncode == 99:
+        pytest.skip("no mount namespace here")
+    assert run.returncode == 1, run.stderr[-3000:]
+    assert "Traceback" not in run.stderr
+    lines = error_lines(run.stderr)
+    assert len(lines) == 1 and lines[0].startswith(f"run_all: error: disk full writing {full}/"), \
+        run.stderr[-3000:]
+    steps = read_steps(kept)
+    assert steps and steps == run_episode(0, Params(trials=20)).steps.tolist()[:len(steps)]
+    assert not processes_with(str(tmp_path))
