@@ -102,11 +102,15 @@ def test_checker(checks, name):
         assert sum(line.startswith("PASS  ") for line in lines) == len(RULES), report
 
 
+# Each graph of this module runs in a namespace of its own (but the one that tests the root
+# namespace): what a previous graph leaves in DDS discovery for a while cannot stop the next.
+
 def test_gymnasium_node_run_equals_core_on_gymnasium_physics(ros_env, tmp_path):
     trials, max_steps, seed = 12, 300, 1
     env = ros_env
     result = subprocess.run(
-        [PY, "-m", "clnn_ros.run_all", "--quiet", "--env", "gymnasium", "--seed", str(seed),
+        [PY, "-m", "clnn_ros.run_all", "--quiet", "--namespace", "gymnasium", "--env",
+         "gymnasium", "--seed", str(seed),
          "--nsv", "2", "--velocity-edge", "0.3", "--trials", str(trials), "--max-steps",
          str(max_steps), "--out", str(tmp_path)], env=env, capture_output=True, text=True,
         timeout=120)
@@ -170,8 +174,8 @@ def test_run_all_environment_options_are_checked(ros_env, args, message):
 def test_graph_encodes_other_angle_edges_from_parameters_only(ros_env, tmp_path):
     env = ros_env
     result = subprocess.run(
-        [PY, "-m", "clnn_ros.run_all", "--quiet", "--no-record", "--option",
-         "angle_edges_deg=-3,0,3", "--seed", "1", "--trials", "6", "--max-steps", "400",
+        [PY, "-m", "clnn_ros.run_all", "--quiet", "--no-record", "--namespace", "edges",
+         "--option", "angle_edges_deg=-3,0,3", "--seed", "1", "--trials", "6", "--max-steps", "400",
          "--out", str(tmp_path)], env=env, capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
     core = run_episode(1, Params(angle_edges_deg="-3,0,3", trials=6, max_steps=400))
@@ -234,7 +238,7 @@ def end(*processes: subprocess.Popen | None) -> None:
             process.wait(timeout=30)
 
 
-@pytest.mark.parametrize("namespace", [None, "robot1"])
+@pytest.mark.parametrize("namespace", [None, "robot1"])  # the root namespace, /robot1
 def test_external_environment_started_separately(ros_env, tmp_path, namespace):
     """run_all --env external starts everything but the environment; the environment node,
     started by hand a few seconds later with the run's parameters (and in the run's namespace),
@@ -248,7 +252,10 @@ def test_external_environment_started_separately(ros_env, tmp_path, namespace):
     environment = None
     try:
         stdout = Lines(run.stdout)
-        waiting = stdout.wait_for(WAITING, timeout=60)
+        try:
+            waiting = stdout.wait_for(WAITING, timeout=60)
+        except AssertionError as error:
+            raise AssertionError(f"{error}\n{(tmp_path / 'run_all.err').read_text()}") from None
         assert f"in namespace /{namespace or ''} " in waiting, waiting
         time.sleep(3.0)  # the rest of the graph starts meanwhile, and waits
         remaps = ["-r", f"__ns:=/{namespace}", "-r", f"/clock:=/{namespace}/clock"] \
@@ -260,7 +267,7 @@ def test_external_environment_started_separately(ros_env, tmp_path, namespace):
             cwd=ROOT, env=ros_env, stdin=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         status = run.wait(timeout=180)
         stderr = (tmp_path / "run_all.err").read_text()
-        assert status == 0, stderr
+        assert status == 0, f"{stdout.text()}\n{stderr}"
         assert stdout.wait_for("run_all: completed:", timeout=10), stdout.text()
         # the environment ends by itself on EPISODE_END
         assert environment.wait(timeout=20) == 0, environment.stderr.read()
@@ -279,8 +286,8 @@ def test_external_environment_that_never_comes(ros_env, tmp_path):
     stall_timeout, margin = 3.0, 30.0
     started = time.monotonic()
     run = start_external_run(ros_env, ["--stall-timeout", str(stall_timeout), "--no-record",
-                                       "--trials", "2", "--max-steps", "100"],
-                             tmp_path / "run_all.err")
+                                       "--trials", "2", "--max-steps", "100",
+                                       "--namespace", "nobody"], tmp_path / "run_all.err")
     try:
         Lines(run.stdout).wait_for(WAITING, timeout=60)
         waiting_at = time.monotonic()
@@ -298,4 +305,5 @@ def test_external_environment_that_never_comes(ros_env, tmp_path):
     assert status == 1, stderr
     errors = [line for line in stderr.splitlines() if line.startswith("run_all: error:")]
     assert len(errors) == 1, stderr
-    assert "environment" in errors[0] and f"{stall_timeout:g} s" in errors[0], errors[0]
+    assert "environment" in errors[0] and "/nobody" in errors[0] and \
+        f"{stall_timeout:g} s" in errors[0], errors[0]
