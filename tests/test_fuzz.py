@@ -21,7 +21,9 @@ import pytest
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
 
-DOMAIN_ID = str(90 + os.getpid() % 10)
+from conftest import free_domain_id
+
+DOMAIN_ID = free_domain_id()
 FUZZER = Path(__file__).parents[1] / "scripts" / "fuzz_graph.py"
 # GraphNode.refusal_summary, logged once at exit:
 # "[WARN] [<time>] [<node>]: refused N messages: <topic> (<kind>) <count>, ..."
