@@ -54,8 +54,10 @@ RUN_ALL_SETS = {"out_dir": "--out", "extra_nodes": "--bag / --no-record",
                 "external_nodes": "--env external"}
 # --env-node: a command starting with one of these runs with run_all's interpreter (its venv).
 PYTHON_NAMES = ("python", "python3")
-SHUTDOWN_GRACE_S = 5.0  # how long nodes get to exit after the episode ends or Ctrl-C
-RECORDER_GRACE_S = 5.0  # how long the recorder gets to finish the bag after the nodes
+# After the episode ends or Ctrl-C, how long the nodes get to exit by themselves, and then the
+# recorder to finish the bag (it may lag on a loaded machine): then they are terminated.
+SHUTDOWN_GRACE_S = 10.0
+RECORDER_GRACE_S = 30.0
 
 
 def parse_args(argv):
@@ -269,8 +271,8 @@ def report_failure(child) -> None:
 
 def warn_forced(names: list[str]) -> None:
     for name in names:
-        print(f"run_all: warning: node {name} did not exit within {SHUTDOWN_GRACE_S:g} s; "
-              f"terminated", file=sys.stderr, flush=True)
+        print(f"run_all: warning: node {name} did not exit in time; terminated",
+              file=sys.stderr, flush=True)
 
 
 def run_composed(values: dict, environment: str | None, namespace: str,

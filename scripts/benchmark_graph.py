@@ -41,9 +41,11 @@ the ring's, the benchmark's own).
    with 2 x cores (at least 4) busy `python` processes, killed afterwards (and each ends by
    itself after a time limit in any case).
 
-Profiles (EventsExecutor): the composed graph under cProfile from its first clock to the
-trial manager's stop, and one 5-process run with every node process under cProfile with a
-CPU-time timer from its first publication to its exit (both through the sitecustomize hook).
+Profiles (EventsExecutor): the composed graph under cProfile from the trial manager's first
+clock to its stop (a driver that wraps TrialManagerNode.publish_clock and .stop), and one
+5-process run with every node process under cProfile with a CPU-time timer from its first
+publication (GraphNode.stamp) to its exit (the sitecustomize hook). A hook point that no longer
+exists fails the benchmark: nothing falls back silently to another measurement.
 Exclusive time is grouped into the executor, rclpy's TimeSource (/clock for use_sim_time),
 publish, received message objects, message construction, node callbacks, numpy, the core model
 and other; plus a micro-benchmark of serialization alone.
@@ -66,10 +68,11 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 SEED = 1
-# Seed 1, 1 SV: a trial is about 270 ticks; 40 trials = 11150 ticks, 8 = 1912, 6 = 1381, 2 = 302.
-FULL = dict(repeats=3, graph_trials={"events": 40, "single": 8},
+# Seed 1, 1 SV: a trial is about 270 ticks; 30 trials = 8402 ticks, 8 = 1912, 6 = 1381,
+# 5 = 1115, 2 = 302.
+FULL = dict(repeats=3, graph_trials={"events": 30, "single": 5},
             ring_ticks={("separate", "events"): 5000, ("composed", "events"): 20000,
-                        ("separate", "single"): 2000, ("composed", "single"): 2000},
+                        ("separate", "single"): 1000, ("composed", "single"): 1000},
             profile_trials=8, paced_trials=6)
 QUICK = dict(repeats=1, graph_trials={"events": 8, "single": 2},
              ring_ticks={("separate", "events"): 1000, ("composed", "events"): 4000,
@@ -113,6 +116,15 @@ NEEDS = {
     "trial_manager": (("state", 1), ("action", 1)),
 }
 RING_NS = "/bench_ring"
+# The graph's nodes with use_sim_time, whose rclpy TimeSource subscribes /clock as well.
+TIME_SOURCES = 4
+TYPE_NAMES = {"clock": "rosgraph_msgs/Clock", "state": "clnn_ros_msgs/CartPoleState",
+              "spikes": "clnn_ros_msgs/SpikeVector", "reward": "clnn_ros_msgs/Reward",
+              "action": "clnn_ros_msgs/Action"}
+
+
+def type_name(topic: str) -> str:
+    return TYPE_NAMES[topic]
 
 
 # ----------------------------------------------------------------------------- raw ring nodes
@@ -530,7 +542,10 @@ class Bench:
         summary = json.loads((out / "summary.json").read_text())
         if summary["exit_reason"] != "completed":
             raise RuntimeError(f"graph run did not complete: {summary}")
-        if ticks_file.exists():
+        if "CLNN_BENCH_PROFILE_DIR" not in env_extra:
+            if not ticks_file.exists():
+                raise RuntimeError("the latency hook recorded nothing: has the trial manager "
+                                   "still a TickJoin and a clock_pub? (SITECUSTOMIZE)")
             record = json.loads(ticks_file.read_text())
             published, completed = record["published"], record["completed"]
             if len(published) != summary["ticks"] or len(completed) != summary["ticks"]:
@@ -707,35 +722,45 @@ def profile_separate(bench: Bench) -> tuple[dict, dict]:
     profiles.mkdir()
     summary = bench.graph_rate("separate", "events", bench.sizes["profile_trials"],
                                CLNN_BENCH_PROFILE_DIR=profiles)
-    return {p.stem: pstats.Stats(str(p)) for p in sorted(profiles.glob("*.prof"))}, summary
+    found = {p.stem: pstats.Stats(str(p)) for p in sorted(profiles.glob("*.prof"))}
+    if not found:
+        raise RuntimeError("no node process wrote a profile: has GraphNode still stamp()? "
+                           "(SITECUSTOMIZE)")
+    return found, summary
 
 
 # ----------------------------------------------------------------------------- micro-benchmarks
 
 def serialization_cost(repeats: int = 10000) -> dict:
-    """Microseconds per tick to serialize the tick's 5 messages (the publishers' side) and
-    deserialize its 10 deliveries, for the graph's types and for UInt64."""
+    """Microseconds to serialize one message (the publisher's side) and to deserialize one
+    delivery, per topic, for the graph's types ("typed") and for UInt64: {kind: {topic:
+    (serialize, deserialize)}}, the best of 3 rounds."""
     from rclpy.serialization import deserialize_message, serialize_message
 
     result = {}
     for kind in ("uint64", "typed"):
         msgs = ring_messages(kind)
-        data = {t: serialize_message(m) for t, m in msgs.items()}
-        deliveries = [(data[t], type(msgs[t])) for t, (_, subs) in EDGES.items() for _ in subs]
-        best_ser = best_de = float("inf")
-        for _ in range(3):
-            start = time.perf_counter()
-            for _ in range(repeats):
-                for m in msgs.values():
-                    serialize_message(m)
-            best_ser = min(best_ser, (time.perf_counter() - start) / repeats)
-            start = time.perf_counter()
-            for _ in range(repeats):
-                for d, t in deliveries:
-                    deserialize_message(d, t)
-            best_de = min(best_de, (time.perf_counter() - start) / repeats)
-        result[kind] = (1e6 * best_ser, 1e6 * best_de)
+        result[kind] = {}
+        for topic, msg in msgs.items():
+            data, cls = serialize_message(msg), type(msg)
+            best_ser = best_de = float("inf")
+            for _ in range(3):
+                start = time.perf_counter()
+                for _ in range(repeats):
+                    serialize_message(msg)
+                best_ser = min(best_ser, (time.perf_counter() - start) / repeats)
+                start = time.perf_counter()
+                for _ in range(repeats):
+                    deserialize_message(data, cls)
+                best_de = min(best_de, (time.perf_counter() - start) / repeats)
+            result[kind][topic] = (1e6 * best_ser, 1e6 * best_de)
     return result
+
+
+def per_tick_serialization(costs: dict, deliveries: dict) -> tuple[float, float]:
+    """(serialize the tick's 5 messages, deserialize its deliveries), microseconds."""
+    return (sum(ser for ser, _ in costs.values()),
+            sum(de * deliveries[topic] for topic, (_, de) in costs.items()))
 
 
 # ----------------------------------------------------------------------------- the run
@@ -765,6 +790,7 @@ def main_benchmark(a) -> int:
                if not (what == "typed" and executor == "single")]
     rates = {c: [] for c in configs}
     ticks, latencies = {}, {}
+    spent = dict.fromkeys(EXECUTORS, 0.0)  # seconds of this run per executor's rows
     with tempfile.TemporaryDirectory(prefix="clnn_bench_graph_") as tmp:
         work = Path(tmp)
         os.environ.setdefault("ROS_LOG_DIR", str(work / "ros_log"))
@@ -772,6 +798,7 @@ def main_benchmark(a) -> int:
         for rep in range(repeats):  # round robin: a burst of other load hits all alike
             for c in configs:
                 layout, executor, what = c
+                began = time.monotonic()
                 if what == "graph":
                     s = bench.graph_rate(layout, executor, sizes["graph_trials"][executor])
                     ticks[c] = s["ticks"]
@@ -779,8 +806,10 @@ def main_benchmark(a) -> int:
                 else:
                     s = bench.ring_rate(layout, executor, what)
                 rates[c].append(s["ticks_per_s"])
+                spent[executor] += time.monotonic() - began
                 print(f"  run {rep + 1}/{repeats}: {layout:9s} {executor:7s} {what:7s} "
-                      f"{s['ticks_per_s']:7.0f} ticks/s", flush=True)
+                      f"{s['ticks_per_s']:7.0f} ticks/s  ({time.monotonic() - began:.0f} s)",
+                      flush=True)
         rows = []
         for executor in EXECUTORS:
             for layout in LAYOUTS:
@@ -805,7 +834,7 @@ def main_benchmark(a) -> int:
         separate = profile_separate(bench)
         elapsed = time.perf_counter() - t_start
         doc = report(rows, paced, ser, composed, separate, sizes, a.quick, elapsed,
-                     (load_before, os.getloadavg()))
+                     (load_before, os.getloadavg()), spent)
     if a.out is not None:
         a.out.parent.mkdir(parents=True, exist_ok=True)
         a.out.write_text(doc)
@@ -843,7 +872,7 @@ def shown_path(value: str) -> str:
         return value
 
 
-def report(rows, paced, ser, composed, separate, sizes, quick, elapsed, loads) -> str:
+def report(rows, paced, ser, composed, separate, sizes, quick, elapsed, loads, spent) -> str:
     repeats = sizes["repeats"]
     events = [r for r in rows if r["executor"] == "events"]
     by_layout = {r["layout"]: r for r in events}
@@ -896,7 +925,9 @@ def report(rows, paced, ser, composed, separate, sizes, quick, elapsed, loads) -
         "check, the nodes fill their messages from the model, and trial events, weights and "
         "checkpoints come at each trial's end.",
         f"* Each figure is the best of {repeats} run{'s' if repeats > 1 else ''}, run round robin"
-        + (" (range in parentheses)." if repeats > 1 else "."),
+        + (" (range in parentheses)." if repeats > 1 else ".")
+        + f" The EventsExecutor rows took {spent['events']:.0f} s of this run, the "
+        f"SingleThreadedExecutor rows (fewer ticks) {spent['single']:.0f} s.",
         "",
         "| layout | executor | graph ticks/s | raw ring ticks/s (UInt64) | graph / raw ring | "
         "typed ring ticks/s | graph / typed ring |",
@@ -959,7 +990,7 @@ def report(rows, paced, ser, composed, separate, sizes, quick, elapsed, loads) -
         "whose inputs come after its slot goes out at the next free slot (a *late slot*). For "
         "each tick it notes the time just before publishing state(t) and the time the agent's "
         "action(t) reaches its callback (time.monotonic_ns): the latency state -> action "
-        "(encoder and reward, agent: 3 hops, 2 processes on the critical path). "
+        "(environment -> encoder and reward -> agent -> environment: 3 hops). "
         f"*Within {DEADLINE_MS:g} ms*: the share of all ticks whose action came back within "
         f"{DEADLINE_MS:g} ms of its state (a tick whose action never came counts as missed). "
         f"*Hogs*: {HOGS} processes `python -c 'while ...: pass'` (2 x cores, at least 4; each "
@@ -978,7 +1009,11 @@ def report(rows, paced, ser, composed, separate, sizes, quick, elapsed, loads) -
                      f"{p['run_s']:.0f} |")
     lines.append("")
 
-    (u_ser, u_de), (t_ser, t_de) = ser["uint64"], ser["typed"]
+    ring_deliveries = {topic: len(subscribers) for topic, (_, subscribers) in EDGES.items()}
+    graph_deliveries = {**ring_deliveries, "clock": ring_deliveries["clock"] + TIME_SOURCES}
+    u_ser, u_de = per_tick_serialization(ser["uint64"], ring_deliveries)
+    t_ser, t_de = per_tick_serialization(ser["typed"], ring_deliveries)
+    g_de = per_tick_serialization(ser["typed"], graph_deliveries)[1]
     (c_stats, c_summary), (n_stats, n_summary) = composed, separate
     c_ticks, n_ticks = c_summary["ticks"], n_summary["ticks"]
     c_cats = categorize(c_stats)
@@ -1005,14 +1040,28 @@ def report(rows, paced, ser, composed, separate, sizes, quick, elapsed, loads) -
         "",
         "## Where the time goes",
         "",
-        "Serialization alone (rclpy.serialization in one process, no DDS), microseconds per "
-        "tick: the tick's 5 messages serialized once each, its 10 deliveries deserialized "
-        "(C conversion + CDR, and on receive the Python message objects):",
+        "Serialization alone (rclpy.serialization in one process, no DDS; Python message "
+        "object <-> C conversion + CDR), microseconds: one message of each topic of a tick "
+        "(with the content of a typical tick) serialized once, one delivery deserialized; "
+        "deliveries per tick in the ring and in the graph (where each clock also goes to the "
+        f"{TIME_SOURCES} TimeSources):",
         "",
-        "| messages | serialize 5 | deserialize 10 | total |",
+        "| topic | type | serialize | deserialize | ring deliveries | graph deliveries |",
+        "|---|---|---:|---:|---:|---:|",
+    ]
+    for topic, (t_s, t_d) in ser["typed"].items():
+        lines.append(f"| {topic} | {type_name(topic)} | {t_s:.2f} | {t_d:.2f} | "
+                     f"{ring_deliveries[topic]} | {graph_deliveries[topic]} |")
+    lines += [
+        "",
+        "Per tick (5 messages serialized, every delivery deserialized):",
+        "",
+        "| messages | serialize 5 | deserialize the ring's 10 | total |",
         "|---|---:|---:|---:|",
         f"| std_msgs/UInt64 | {u_ser:.1f} | {u_de:.1f} | {u_ser + u_de:.1f} |",
         f"| the graph's types | {t_ser:.1f} | {t_de:.1f} | {t_ser + t_de:.1f} |",
+        f"| the graph's types, the graph's {sum(graph_deliveries.values())} deliveries | "
+        f"{t_ser:.1f} | {g_de:.1f} | {t_ser + g_de:.1f} |",
         "",
         f"cProfile, EventsExecutor, {sizes['profile_trials']} trials, no recorder. Exclusive "
         "time in microseconds per tick; message-class code counts as deserialization when the "

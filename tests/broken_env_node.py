@@ -30,12 +30,12 @@ class BrokenEnvironmentNode(EnvironmentNode):
             return
         super().on_trial_event(event)
 
-    def refuse(self, topic: str, msg, reason: str) -> None:
+    def refuse(self, topic: str, msg, reason: str, kind: str = "tick") -> None:
         if "accept_bad_force" in BUGS and isinstance(msg, Action) and msg.force_direction == 5:
             msg.force_direction = 1  # ignores the content rules' verdict
             super().on_action(msg)
             return
-        super().refuse(topic, msg, reason)
+        super().refuse(topic, msg, reason, kind)
 
     @property
     def successful_steps(self) -> int:

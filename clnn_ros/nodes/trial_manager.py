@@ -196,13 +196,13 @@ class TrialManagerNode(GraphNode):
                 self.started_at = now
                 self.advance(0, starts_trial=True)
             return
-        if missing and missing <= self.external_nodes and \
-                not (self.expected - self.external_nodes) - self.ready:
-            # Everything run_all started is ready: the nodes started by someone else get the
-            # stall timeout to appear.
+        absent = (self.external_nodes & missing) - self.in_graph
+        if absent and (self.expected - self.external_nodes) <= self.in_graph:
+            # Everything run_all started is up (some wait for the absent node to be ready):
+            # the nodes started by someone else get the stall timeout to appear.
             self.externals_awaited_since = (self.externals_awaited_since or 0.0) + running
             if self.externals_awaited_since > self.settings["stall_timeout_s"]:
-                self.stop(1, f"no {', '.join(sorted(missing))} node appeared in namespace "
+                self.stop(1, f"no {', '.join(sorted(absent))} node appeared in namespace "
                              f"{self.get_namespace()} within {self.settings['stall_timeout_s']:g}"
                              f" s (start it yourself: docs/ENV_CONTRACT.md)")
         elif now - self.last_note >= WAITING_NOTE_S:
@@ -328,7 +328,8 @@ class TrialManagerNode(GraphNode):
         steps = [r[2] for r in self.results]
         write_text_atomically(out / "summary.json", json.dumps({
             "seed": self.settings["seed"], "trials": len(steps),
-            "mean_steps": float(np.mean(steps)) if steps else None, "ticks": tick + 1,
+            "mean_steps": float(np.mean(steps)) if steps else None,
+            "ticks": tick + 1 if self.started_at else 0,
             "wall_s": wall, "ticks_per_s": (tick + 1) / wall if wall else None,
             "exit_reason": self.exit_reason}, indent=2))
 
