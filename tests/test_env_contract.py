@@ -7,10 +7,8 @@ parameters; `run_all --env external` runs with an environment node started by so
 from __future__ import annotations
 
 import csv
-import errno
 import os
 import queue
-import socket
 import subprocess
 import sys
 import threading
@@ -27,24 +25,14 @@ from clnn_ros.core.episode import run_episode
 from clnn_ros.core.gym_physics import GymCartPole, gym_matched_params
 from clnn_ros.core.params import ParamError, Params, params_from_strings
 
+from conftest import free_domain_id
+
 ROOT = Path(__file__).resolve().parents[1]
 BROKEN = str(Path(__file__).with_name("broken_env_node.py"))
 PY = sys.executable
 
 
-def domain_in_use(domain: int) -> bool:
-    """Fast DDS gives a domain's first participant the UDP port 7410 + 250 x domain."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        try:
-            probe.bind(("0.0.0.0", 7410 + 250 * domain))
-        except OSError as error:
-            return error.errno == errno.EADDRINUSE
-    return False
-
-
-# This module's ROS domain: one of 190-199 that no participant uses now.
-DOMAIN_ID = str(next((d for d in (190 + (os.getpid() + i) % 10 for i in range(10))
-                      if not domain_in_use(d)), 190 + os.getpid() % 10))
+DOMAIN_ID = free_domain_id()
 # name: (node command, checker options, lines the report must have); each check runs in its
 # own namespace /check_<name> of the module's domain
 CHECKS = {
