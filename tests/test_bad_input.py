@@ -7,7 +7,6 @@ CPU seconds (CPU, not wall time: the suite shares a loaded 2-core machine)."""
 
 from __future__ import annotations
 
-import os
 import resource
 import subprocess
 import sys

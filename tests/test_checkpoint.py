@@ -5,7 +5,6 @@ before any node starts; fig7 weights in the graph equal the core; the agent's sa
 from __future__ import annotations
 
 import dataclasses
-import os
 import subprocess
 import sys
 from pathlib import Path

@@ -5,13 +5,9 @@ core episode), and a full disk (one line, the finished trials kept whole)."""
 
 from __future__ import annotations
 
-import csv
-import os
 import signal
 import subprocess
 import sys
-import time
-from pathlib import Path
 
 import pytest
 import rclpy

@@ -30,7 +30,7 @@ from std_msgs.msg import String
 
 from clnn_ros_msgs.msg import TrialEvent
 
-from ..core.params import ParamError, Params
+from ..core.params import ParamError
 from ..names import (ACTION, CLOCK, READY, REWARD, SPIKES, STATE, TRIAL_EVENT, WEIGHTS)
 from .parameters import declare_parameters, names_list, read_params_file
 from .validate import (action_problem, clock_problem, event_problem, reward_problem,
