@@ -12,9 +12,10 @@ What ends an episode early, with exit status 1 and the node to blame:
   trial manager that was itself paused or starved does not count the pause); the node named is
   the first of the tick's chain whose message for the tick is missing;
 * a node of the graph that leaves the ROS graph (its process exited);
-* before the first tick: another graph of the same node names in the same namespace and domain,
-  or a node of `external_nodes` that does not appear within `stall_timeout_s` once the rest of
-  the graph is ready. Nodes that run_all started are waited for as long as they take: run_all
+* another graph of the same node names in the same namespace and domain, seen before the first
+  tick or within DISCOVERY_S of the trial manager's start (exit status NOT_STARTED: the run is
+  abandoned); a node of `external_nodes` that does not appear within `stall_timeout_s` once
+  the rest of the graph is up. Nodes that run_all started are waited for as long as they take: run_all
   sees a process that dies.
 With a recorder it keeps the clock at most RECORDER_WINDOW ticks ahead of the recorder's
 progress, so that no message is lost to a slow recorder. Results go to out_dir as each trial
@@ -48,8 +49,9 @@ from .parameters import names_list
 
 WATCHDOG_S = 0.1
 GRAPH_CHECK_S = 0.5  # how often the ROS graph is looked at for nodes that left it
-# The least time before the first tick: another graph of the same names is discovered by then
-# (a new participant sees a running one after 0.1-2.8 s here).
+# For this long after it starts, the trial manager looks for another graph of the same names in
+# its namespace (a new participant sees a running one after 0.1-2.8 s here); the episode runs
+# meanwhile, and is abandoned if one turns up.
 DISCOVERY_S = 3.0
 WAITING_NOTE_S = 10.0  # while the graph is not ready, a note of what it waits for this often
 # Who publishes what within a tick, in causal order: the first one missing went silent.
@@ -175,7 +177,7 @@ class TrialManagerNode(GraphNode):
         namespace = self.get_namespace()
         present = Counter(name for name, ns in self.get_node_names_and_namespaces()
                           if ns == namespace)
-        if self.started_at is None:
+        if time.monotonic() - self.created_at < DISCOVERY_S or self.started_at is None:
             twice = sorted(n for n in self.expected | {TRIAL_MANAGER} if present[n] > 1)
             if twice:
                 self.not_started = True
@@ -192,9 +194,8 @@ class TrialManagerNode(GraphNode):
     def check_start(self, now: float, running: float) -> None:
         missing = self.expected - self.ready
         if not missing and self.publishers_matched():
-            if now - self.created_at >= DISCOVERY_S:
-                self.started_at = now
-                self.advance(0, starts_trial=True)
+            self.started_at = now
+            self.advance(0, starts_trial=True)
             return
         absent = (self.external_nodes & missing) - self.in_graph
         if absent and (self.expected - self.external_nodes) <= self.in_graph:
