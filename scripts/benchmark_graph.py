@@ -79,6 +79,7 @@ QUICK = dict(repeats=1, graph_trials={"events": 8, "single": 2},
                          ("separate", "single"): 500, ("composed", "single"): 500},
              profile_trials=2, paced_trials=2)
 RUN_TIMEOUT_S = 120
+TEARDOWN_GRACE_S = 10.0  # a ring process still running this long after the result is killed
 LAYOUTS = ("separate", "composed")
 EXECUTORS = ("events", "single")
 EXECUTOR_NAMES = {"events": "EventsExecutor", "single": "SingleThreadedExecutor"}
@@ -471,6 +472,45 @@ def child_env(**extra) -> dict:
     return env
 
 
+def cpu_times() -> tuple[int, int]:
+    """(busy, total) jiffies of the whole machine so far (/proc/stat)."""
+    with open("/proc/stat") as stat:
+        fields = [int(v) for v in stat.readline().split()[1:]]
+    idle = fields[3] + (fields[4] if len(fields) > 4 else 0)  # idle + iowait
+    total = sum(fields[:8])  # guest time is counted in user already
+    return total - idle, total
+
+
+class CpuSampler:
+    """Samples cpu_times() every `interval` s in a thread: how busy the whole machine was in a
+    window of time.monotonic_ns()."""
+
+    def __init__(self, interval: float = 0.25):
+        import threading
+        self.samples, self.interval = [], interval
+        self.stopped = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        while True:
+            self.samples.append((time.monotonic_ns(), *cpu_times()))
+            if self.stopped.wait(self.interval):
+                return
+
+    def stop(self) -> None:
+        self.stopped.set()
+        self.thread.join()
+
+    def busy_cores(self, start_ns: int, end_ns: int) -> float:
+        """Average busy cores (every process) between the samples inside [start, end]."""
+        inside = [s for s in self.samples if start_ns <= s[0] <= end_ns]
+        if len(inside) < 2 or inside[-1][2] == inside[0][2]:
+            return float("nan")
+        (_, b0, t0), (_, b1, t1) = inside[0], inside[-1]
+        return (os.cpu_count() or 1) * (b1 - b0) / (t1 - t0)
+
+
 def kill_group(p: subprocess.Popen) -> None:
     if p.poll() is None:
         try:
@@ -517,6 +557,7 @@ class Bench:
 
     def __init__(self, sizes: dict, work: Path):
         self.sizes, self.work = sizes, work
+        self.forced_ring_exits = 0
         self.site = work / "site"
         self.site.mkdir()
         (self.site / "sitecustomize.py").write_text(SITECUSTOMIZE)
@@ -561,9 +602,70 @@ class Bench:
             commands = [me + ["ring-composed", *common]]
         else:  # the trial manager last, as run_all starts it
             commands = [me + ["ring-stage", "--role", role, *common] for role in ROLES]
-        outputs = run_group(commands, child_env(CLNN_ROS_EXECUTOR=executor), RUN_TIMEOUT_S)
-        line = next(l for o in outputs for l in o.splitlines() if l.startswith("RING_RESULT "))
-        return json.loads(line.split(" ", 1)[1])
+        return self.run_ring(commands, child_env(CLNN_ROS_EXECUTOR=executor))
+
+    def run_ring(self, commands: list[list[str]], env: dict) -> dict:
+        """Run the ring's processes; the trial manager's (the last command's) RING_RESULT. A
+        ring process that has not exited TEARDOWN_GRACE_S after the result is in (seen:
+        rclpy/Fast DDS teardown hanging once in a while; the teardown is not measured) is
+        killed, its own Fast DDS shared-memory files removed, and counted in
+        self.forced_ring_exits."""
+        from clnn_ros.rosenv import own_fast_dds_files, remove_files_of_dead_process
+
+        base = self.out_dir("ring")
+        outs = [base.with_name(f"{base.name}_{i}.out") for i in range(len(commands))]
+        errs = [path.with_suffix(".err") for path in outs]
+        procs = []
+
+        def kill(p: subprocess.Popen) -> None:
+            names = own_fast_dds_files(p.pid)
+            kill_group(p)
+            p.wait()
+            remove_files_of_dead_process(names)
+
+        def tail(i: int) -> str:
+            return errs[i].read_text(errors="replace")[-2000:]
+
+        try:
+            for c, out, err in zip(commands, outs, errs):
+                with open(out, "w") as o, open(err, "w") as e:
+                    procs.append(subprocess.Popen(c, cwd=REPO, env=env, stdin=subprocess.DEVNULL,
+                                                  stdout=o, stderr=e, start_new_session=True))
+            deadline = time.monotonic() + RUN_TIMEOUT_S
+            result = result_at = None
+            while any(p.poll() is None for p in procs):
+                now = time.monotonic()
+                if result is None:
+                    line = next((l for l in outs[-1].read_text().splitlines()
+                                 if l.startswith("RING_RESULT ")), None)
+                    if line is not None:
+                        result, result_at = json.loads(line.split(" ", 1)[1]), now
+                if result is not None and now - result_at > TEARDOWN_GRACE_S:
+                    hung = [p for p in procs if p.poll() is None]
+                    for p in hung:
+                        kill(p)
+                    self.forced_ring_exits += len(hung)
+                    print(f"  (ring: {len(hung)} process(es) hung at teardown after the "
+                          f"result; killed)", file=sys.stderr, flush=True)
+                    return result
+                if now > deadline:
+                    raise RuntimeError(f"ring timed out ({' '.join(commands[-1][-8:])}):\n"
+                                       + "\n".join(tail(i) for i in range(len(procs))))
+                time.sleep(0.05)
+        except BaseException:
+            for p in procs:
+                if p.poll() is None:
+                    kill(p)
+            raise
+        failed = [f"{' '.join(c[-8:])}: exit {p.returncode}\n{tail(i)}"
+                  for i, (p, c) in enumerate(zip(procs, commands)) if p.returncode != 0]
+        if failed or result is None:
+            line = next((l for l in outs[-1].read_text().splitlines()
+                         if l.startswith("RING_RESULT ")), None)
+            if failed or line is None:
+                raise RuntimeError("ring failed:\n" + ("\n".join(failed) or tail(-1)))
+            result = json.loads(line.split(" ", 1)[1])
+        return result
 
     def paced_run(self, hogs: int) -> dict:
         """The 50 Hz run with `hogs` busy processes beside it (started before run_all, killed
@@ -583,8 +685,11 @@ class Bench:
                                               stdin=subprocess.DEVNULL))
             if hogs:
                 time.sleep(1.0)  # the hogs are busy before the graph starts
-            began = time.monotonic()
-            run_group([cmd], child_env(CLNN_ROS_EXECUTOR="events"), PACED_TIMEOUT_S)
+            began, sampler = time.monotonic(), CpuSampler()
+            try:
+                run_group([cmd], child_env(CLNN_ROS_EXECUTOR="events"), PACED_TIMEOUT_S)
+            finally:
+                sampler.stop()
             wall = time.monotonic() - began
         finally:
             for p in procs:
@@ -599,7 +704,8 @@ class Bench:
         ticks = data["ticks"]
         latencies = [(a - p) / 1e6 for _t, _s, p, a in ticks if a is not None]
         slots = [s for _t, s, _p, _a in ticks]
-        return dict(hogs=hogs, ticks=len(ticks), summary=summary, run_s=wall,
+        busy = sampler.busy_cores(ticks[0][2], ticks[-1][2]) if ticks else float("nan")
+        return dict(hogs=hogs, ticks=len(ticks), summary=summary, run_s=wall, busy=busy,
                     answered=len(latencies),
                     within=sum(1 for _t, _s, p, a in ticks
                                if a is not None and a - p <= DEADLINE_MS * 1e6),
@@ -834,7 +940,7 @@ def main_benchmark(a) -> int:
         separate = profile_separate(bench)
         elapsed = time.perf_counter() - t_start
         doc = report(rows, paced, ser, composed, separate, sizes, a.quick, elapsed,
-                     (load_before, os.getloadavg()), spent)
+                     (load_before, os.getloadavg()), spent, bench.forced_ring_exits)
     if a.out is not None:
         a.out.parent.mkdir(parents=True, exist_ok=True)
         a.out.write_text(doc)
@@ -872,7 +978,8 @@ def shown_path(value: str) -> str:
         return value
 
 
-def report(rows, paced, ser, composed, separate, sizes, quick, elapsed, loads, spent) -> str:
+def report(rows, paced, ser, composed, separate, sizes, quick, elapsed, loads, spent,
+           forced_ring_exits) -> str:
     repeats = sizes["repeats"]
     events = [r for r in rows if r["executor"] == "events"]
     by_layout = {r["layout"]: r for r in events}
@@ -898,8 +1005,8 @@ def report(rows, paced, ser, composed, separate, sizes, quick, elapsed, loads, s
         "## Throughput: the graph against the raw ring",
         "",
         "* **Graph**: `python -m clnn_ros.run_all --quiet --no-record --seed 1 --trials N` (1 SV), "
-        "ticks/s from its summary.json (first tick to last: start-up, discovery and the trial "
-        "manager's DISCOVERY_S wait excluded); N = "
+        "ticks/s from its summary.json (first tick to last: start-up and discovery "
+        "excluded); N = "
         f"{sizes['graph_trials']['events']} ({by_layout['separate']['ticks']} ticks) with the "
         f"EventsExecutor (the default), N = {sizes['graph_trials']['single']} "
         f"({rows[2]['ticks']} ticks) with rclpy's SingleThreadedExecutor "
@@ -927,7 +1034,9 @@ def report(rows, paced, ser, composed, separate, sizes, quick, elapsed, loads, s
         f"* Each figure is the best of {repeats} run{'s' if repeats > 1 else ''}, run round robin"
         + (" (range in parentheses)." if repeats > 1 else ".")
         + f" The EventsExecutor rows took {spent['events']:.0f} s of this run, the "
-        f"SingleThreadedExecutor rows (fewer ticks) {spent['single']:.0f} s.",
+        f"SingleThreadedExecutor rows (fewer ticks) {spent['single']:.0f} s."
+        + (f" {forced_ring_exits} ring process(es) hung in their teardown after the result "
+           "(not measured) and were killed." if forced_ring_exits else ""),
         "",
         "| layout | executor | graph ticks/s | raw ring ticks/s (UInt64) | graph / raw ring | "
         "typed ring ticks/s | graph / typed ring |",
@@ -998,16 +1107,20 @@ def report(rows, paced, ser, composed, separate, sizes, quick, elapsed, loads, s
         "after it, at the graph's priority.",
         "",
         f"| condition | ticks | within {DEADLINE_MS:g} ms | p50 ms | p99 ms | max ms | "
-        "late slots | run_all wall s |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|",
+        "late slots | run_all wall s | busy cores |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for p in paced:
         p50, p99, mx, _mean = percentiles(p["latency_ms"])
         name = "idle" if not p["hogs"] else f"{p['hogs']} CPU hogs on {os.cpu_count()} cores"
         lines.append(f"| {name} | {p['ticks']} | **{100 * p['within'] / max(p['ticks'], 1):.1f}%** "
                      f"({p['within']}) | {p50:.2f} | {p99:.2f} | {mx:.2f} | {p['late']} | "
-                     f"{p['run_s']:.0f} |")
-    lines.append("")
+                     f"{p['run_s']:.0f} | {p['busy']:.2f} |")
+    lines += ["", f"*Busy cores*: the machine's average busy cores (of {os.cpu_count()}) from "
+              "the first state to the last, every process counted (/proc/stat, sampled every "
+              "0.25 s): the graph and its recorder at 50 Hz, the hogs, and whatever else ran on "
+              "the machine then (an \"idle\" figure well above the graph's own share means "
+              "other work ran beside it).", ""]
 
     ring_deliveries = {topic: len(subscribers) for topic, (_, subscribers) in EDGES.items()}
     graph_deliveries = {**ring_deliveries, "clock": ring_deliveries["clock"] + TIME_SOURCES}
