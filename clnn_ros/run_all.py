@@ -38,7 +38,7 @@ from .core.params import ParamError, Params, params_from_strings
 from .names import GRAPH_NODES, NOT_STARTED, RECORDER, RUN_SETTINGS, TRIAL_MANAGER
 from .nodes.common import EXIT_WITH_STDIN, catch_signals
 from .nodes.parameters import convert_setting, read_params_file
-from .supervise import Supervisor
+from .supervise import Supervisor, say
 
 NODES = (*GRAPH_NODES, TRIAL_MANAGER)
 # The demonstration: seed 0 goes from 32 steps to the 10,000 cap by trial 11 (about 80k ticks).
@@ -264,15 +264,14 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
 
 def report_failure(child) -> None:
     """The one error line, at once, then the last lines of the child's stderr."""
-    print(f"run_all: error: {child.describe_exit()}", file=sys.stderr, flush=True)
+    say(f"run_all: error: {child.describe_exit()}")
     for line in child.last_lines():
-        print(f"  {child.name}| {line}", file=sys.stderr, flush=True)
+        say(f"  {child.name}| {line}")
 
 
 def warn_forced(names: list[str]) -> None:
     for name in names:
-        print(f"run_all: warning: node {name} did not exit in time; terminated",
-              file=sys.stderr, flush=True)
+        say(f"run_all: warning: node {name} did not exit in time; terminated")
 
 
 def run_composed(values: dict, environment: str | None, namespace: str,
@@ -382,7 +381,7 @@ def main(argv=None) -> int:
                    interrupted)
     finally:
         for problem in supervisor.close():
-            print(f"run_all: warning: {problem}", file=sys.stderr)
+            say(f"run_all: warning: {problem}")
 
 
 def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
@@ -439,14 +438,14 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
     if failed:
         return 1
     if status in (128 + signal.SIGINT, 128 + signal.SIGTERM):
-        print("run_all: interrupted", file=sys.stderr)
+        say("run_all: interrupted")
         return status
     if status == NOT_STARTED and bag_path is not None:
         bag_path.unlink(missing_ok=True)  # what it holds is another graph's
     if status != 0:
         reason = summary.get("exit_reason") or reason or \
             f"the trial manager exited with status {status}"
-        print(f"run_all: error: {reason}", file=sys.stderr)
+        say(f"run_all: error: {reason}")
         return 1
     return 0
 

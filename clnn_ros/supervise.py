@@ -24,9 +24,17 @@ from .rosenv import (own_fast_dds_files, remove_files_of_dead_process,
                      remove_unused_fast_dds_files)
 
 TAIL_LINES = 5
+_STDERR = threading.Lock()
 SAMPLE_S = 0.5  # how often the children's shared-memory files are noted
 # "<prog>: error: <message>" (the project's one-line errors) or a ROS log line at ERROR.
 OWN_ERROR = re.compile(r"^(?:\S+: error: |\[ERROR\] \[[\d.]+\] \[[^\]]+\]: )(.*)$")
+
+
+def say(line: str) -> None:
+    """One whole line on run_all's stderr (the children's stderr readers write there too)."""
+    with _STDERR:
+        sys.stderr.write(line + "\n")
+        sys.stderr.flush()
 
 
 class Child:
@@ -47,7 +55,7 @@ class Child:
             text = line.decode(errors="replace").rstrip("\n")
             self.tail.append(text)
             try:
-                print(text, file=sys.stderr, flush=True)
+                say(text)
             except (OSError, ValueError):
                 pass  # run_all's own stderr is gone: keep draining the child's
 
@@ -127,7 +135,7 @@ class Supervisor:
         """Remove the own Fast DDS files of a child that a signal killed (it could not)."""
         if child.returncode is not None and child.returncode < 0:
             for problem in remove_files_of_dead_process(child.shm_files):
-                print(f"run_all: warning: {problem}", file=sys.stderr, flush=True)
+                say(f"run_all: warning: {problem}")
 
     def stop(self, names: list[str], grace_s: float, interrupt: bool) -> list[str]:
         """Stop these children: SIGINT first if `interrupt`, else they get `grace_s` to exit

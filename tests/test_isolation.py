@@ -130,7 +130,7 @@ def recorded(out: Path) -> dict[str, list]:
     the alignment padding between fields uninitialized, so equal messages may differ there."""
     from rclpy.serialization import deserialize_message
     by_topic = defaultdict(list)
-    for _, topic, publish_time, _, data in raw_messages(out / "run.mcap"):
+    for _, topic, publish_time, _, data, _ in raw_messages(out / "run.mcap"):
         message_type = bag.message_class(bag.TOPIC_TYPES[topic])
         by_topic[topic].append((publish_time, deserialize_message(data, message_type)))
     return dict(by_topic)
