@@ -8,27 +8,16 @@ import subprocess
 
 import pytest
 
-from clnn_ros.rosenv import fast_dds_shm_files, remove_unused_fast_dds_files
-
 
 @pytest.fixture(scope="session")
 def in_private_shm() -> list[str]:
     """A command prefix that runs a command with a /dev/shm of its own (only its files are
     there), or [] where mount namespaces are not allowed: then the shared /dev/shm is used and
-    a file left over is one that is new and unused (remove_shared_memory_of_killed_nodes)."""
+    a file left over is one that is new and unused. (No test removes shared memory itself:
+    run_all removes its own processes' files, never another's.)"""
     prefix = ["unshare", "--mount", "sh", "-c", 'mount -t tmpfs tmpfs /dev/shm && exec "$@"', "_"]
     allowed = subprocess.run([*prefix, "true"], capture_output=True).returncode == 0
     return prefix if allowed else []
-
-
-@pytest.fixture(scope="session", autouse=True)
-def remove_shared_memory_of_killed_nodes():
-    """Some tests SIGKILL a node on purpose; a killed process cannot remove its Fast DDS
-    shared-memory files. At the end, remove those that appeared during the session and that no
-    process uses any more (what Fast DDS's `fastdds shm clean` does)."""
-    before = fast_dds_shm_files()
-    yield
-    remove_unused_fast_dds_files(fast_dds_shm_files() - before)
 
 
 DOMAINS = range(1, 170)  # 0 is everyone's default; 170-232 are left to people's experiments
