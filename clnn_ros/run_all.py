@@ -255,8 +255,10 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
     if failure is not None and not interrupted:
         report_failure(failure)
     nodes = [n for n in NODES if n in supervisor.children]
+    # After a normal end every node has its EPISODE_END; after a failure a node that was still
+    # starting may have missed it: they are told with SIGINT.
     warn_forced(supervisor.stop(nodes, SHUTDOWN_GRACE_S,
-                                interrupt=bool(interrupted or failure)))
+                                interrupt=bool(interrupted or failure or manager.returncode)))
     if interrupted:
         return 128 + interrupted[0], False
     return manager.returncode, failure is not None

@@ -92,7 +92,7 @@ def test_killed_process_is_named_at_once_and_the_graph_comes_down(ros_env, tmp_p
 def test_a_paused_process_is_waited_for(ros_env, tmp_path, node):
     """SIGSTOP for 3 s (below the default stall timeout of 5 s), then SIGCONT: nothing is
     declared dead, the run completes and equals the core."""
-    seed, trials, max_steps = 1, 8, 400
+    seed, trials, max_steps = 1, 5, 400
     process = subprocess.Popen(
         [sys.executable, "-m", "clnn_ros.run_all", "--seed", str(seed), "--trials", str(trials),
          "--max-steps", str(max_steps), "--out", str(tmp_path)],
