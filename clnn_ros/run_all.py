@@ -229,7 +229,7 @@ def child_environment() -> dict:
 
 def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
                  env_command: list[str] | None, namespace: str,
-                 interrupted: list[int]) -> tuple[int, bool]:
+                 interrupted: list[int], began: float) -> tuple[int, bool]:
     """Start the nodes (env_command None: no environment) and watch them until the trial
     manager ends. Returns (its exit status, or 128 + signal; whether run_all saw a process fail
     itself, and said so: one that exited with an error or a signal)."""
@@ -242,12 +242,22 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
         if command is not None:
             supervisor.start(name, [*command, *arguments], child_environment())
     manager = supervisor.children[TRIAL_MANAGER]
-    failure = None
+    failure, ended_at, outcome, status = None, None, None, None
     while manager.returncode is None and not interrupted:
         if failure := supervisor.first_failure(exclude={TRIAL_MANAGER}):
             break
+        if ended_at is None and (outcome := fresh_summary(Path(values["out_dir"]), began)):
+            ended_at = time.monotonic()  # the episode is over and its results written
+        if ended_at is not None and time.monotonic() - ended_at > SHUTDOWN_GRACE_S:
+            # Its DDS participant hangs in deletion (seen once: Fast DDS 2.14's
+            # DomainParticipant::set_listener spins while a discovery callback waits for a lock
+            # it holds, with the GIL held, so no signal handler runs): nothing is lost by
+            # ending it now.
+            warn_forced(supervisor.stop([TRIAL_MANAGER], 0.0, interrupt=False))
+            status = 0 if outcome.get("exit_reason") == "completed" else 1
+            break
         time.sleep(0.02)
-    if manager.returncode is not None and manager.returncode < 0:
+    if status is None and manager.returncode is not None and manager.returncode < 0:
         failure = manager  # stopped from outside: it sent no EPISODE_END
         supervisor.release(manager)
     # Ctrl-C reaches every process of the terminal's group: run_all's own handler has run long
@@ -258,10 +268,12 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
     # After a normal end every node has its EPISODE_END; after a failure a node that was still
     # starting may have missed it: they are told with SIGINT.
     warn_forced(supervisor.stop(nodes, SHUTDOWN_GRACE_S,
-                                interrupt=bool(interrupted or failure or manager.returncode)))
+                                interrupt=bool(interrupted or failure or status or
+                                               manager.returncode)))
+    status = manager.returncode if status is None else status
     if interrupted:
         return 128 + interrupted[0], False
-    return manager.returncode, failure is not None
+    return status, failure is not None
 
 
 def report_failure(child) -> None:
@@ -413,7 +425,7 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
             status, reason = run_composed(values, environment, namespace, interrupted)
         else:
             status, failed = run_separate(supervisor, values, Path(tmp), env_command,
-                                          namespace, interrupted)
+                                          namespace, interrupted, began)
             reason = supervisor.children[TRIAL_MANAGER].own_error()
         if bag_path is not None:
             recorder = supervisor.children[RECORDER]
