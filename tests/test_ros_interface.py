@@ -18,7 +18,7 @@ from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
 
-from test_graph import processes_with, read_steps
+from test_graph import processes_with, read_steps, wait_for_line
 from test_faults import error_lines
 
 from conftest import free_domain_id, ros_environment
@@ -89,21 +89,24 @@ def test_parameters_describe_their_meaning_and_constraints(agent_by_hand):
 
 def test_two_graphs_in_two_namespaces_on_one_domain(ros_env, tmp_path):
     """--namespace moves every node and topic: both episodes equal their core ones, and the
-    topics are under /a and /b."""
-    runs = {}
+    topics are under /a and /b (listed while both graphs run)."""
+    runs, trials = {}, 10
     for name, seed in (("a", 1), ("b", 2)):
         out = tmp_path / name
         runs[name] = (out, seed, subprocess.Popen(
-            [sys.executable, "-m", "clnn_ros.run_all", "--quiet", "--namespace", name,
-             "--seed", str(seed), "--trials", "6", "--max-steps", "400", "--out", str(out)],
+            [sys.executable, "-m", "clnn_ros.run_all", "--namespace", name, "--seed", str(seed),
+             "--trials", str(trials), "--max-steps", "1500", "--out", str(out)],
             env={**ros_env, "CLNN_TEST_RUN": str(tmp_path)}, stdout=subprocess.PIPE,
             stderr=subprocess.PIPE, text=True))
+    for _, _, process in runs.values():
+        wait_for_line(process.stdout, "trial    2/")
     listed = subprocess.run([sys.executable, "-m", "clnn_ros.topics", "--wait", "8"],
                             env=ros_env, capture_output=True, text=True, timeout=30).stdout
     for name, (out, seed, process) in runs.items():
         _, stderr = process.communicate(timeout=180)
         assert process.returncode == 0, stderr[-3000:]
-        assert read_steps(out) == run_episode(seed, Params(trials=6, max_steps=400)).steps.tolist()
+        assert read_steps(out) == run_episode(seed, Params(trials=trials,
+                                                           max_steps=1500)).steps.tolist()
     topics = {line.split()[0] for line in listed.splitlines()}
     assert {"/a/cartpole/state", "/b/cartpole/state", "/a/clock", "/b/rln/action"} <= topics
     assert "/cartpole/state" not in topics
