@@ -22,10 +22,13 @@ from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before r
 
 import rclpy
 import yaml
+from rclpy.exceptions import InvalidTopicNameException
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.validate_topic_name import validate_topic_name
 
 from .bag import TOPIC_TYPES, message_class
 from .cli import OneLineArgumentParser
+from .names import absolute, graph_topic
 from .nodes.common import ros_session
 
 ECHO_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
@@ -125,15 +128,23 @@ class Raster:
 
 
 def topic_type(node, topic: str, wait_s: float) -> str:
-    if topic in TOPIC_TYPES:
-        return TOPIC_TYPES[topic]
+    """The graph's topics in any namespace are known without discovery, which can take seconds
+    on a loaded machine; any other topic must be discovered within wait_s."""
+    try:
+        validate_topic_name(topic)
+    except InvalidTopicNameException as error:
+        why = str(error).splitlines()[0].removeprefix("Invalid topic name: ").rstrip(":")
+        raise EchoError(f"'{topic}' is not a topic name: {why}") from None
+    known_name = graph_topic(node.resolve_topic_name(topic))
+    if known_name in TOPIC_TYPES:
+        return TOPIC_TYPES[known_name]
     deadline = time.monotonic() + wait_s
     while True:
         known = dict(node.get_topic_names_and_types())
         if topic in known:
             return known[topic][0]
         if time.monotonic() > deadline:
-            names = sorted(set(known) | set(TOPIC_TYPES))
+            names = sorted(set(known) | {absolute(name) for name in TOPIC_TYPES})
             raise EchoError(f"unknown topic '{topic}' (not published within {wait_s:g} s; "
                             f"topics: {', '.join(names)})")
         rclpy.spin_once(node, timeout_sec=0.05)

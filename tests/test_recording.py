@@ -210,7 +210,11 @@ def start_run(env, out: Path, *extra):
 def child(process, module: str) -> int:
     found = subprocess.run(["pgrep", "-P", str(process.pid), "-f", module],
                            capture_output=True, text=True).stdout.split()
-    assert len(found) == 1, found
+    if len(found) != 1:
+        process.kill()
+        stdout, stderr = process.communicate(timeout=30)
+        pytest.fail(f"{len(found)} processes of {module}; run_all: {process.returncode}\n"
+                    f"{stdout[-1500:]}\n{stderr[-1500:]}")
     return int(found[0])
 
 
@@ -257,6 +261,12 @@ def test_echo_topics_then_ctrl_c_leaves_a_complete_bag(ros_env, tmp_path):
     unknown = tool(ros_env, "clnn_ros.echo", "/no/such/topic", "--wait", "0.5")
     assert unknown.returncode == 1 and len(unknown.stderr.strip().splitlines()) == 1
     assert "unknown topic '/no/such/topic'" in unknown.stderr
+    bad_name = tool(ros_env, "clnn_ros.echo", "/no such topic")
+    assert bad_name.returncode == 1 and bad_name.stderr.startswith(
+        "echo: error: '/no such topic' is not a topic name: ") and "Traceback" not in bad_name.stderr
+    # A graph topic in another namespace is known without discovery: its fields are checked.
+    bad_field = tool(ros_env, "clnn_ros.echo", "/robot1/rln/action", "--field", "no_such_field")
+    assert bad_field.returncode == 1 and "no_such_field" in bad_field.stderr
 
     os.killpg(process.pid, signal.SIGINT)
     _, stderr = process.communicate(timeout=30)
@@ -272,6 +282,7 @@ def test_killed_recorder_leaves_its_complete_chunks(ros_env, tmp_path):
     deadline = time.monotonic() + 60
     while (not path.exists() or path.stat().st_size < 20_000) and time.monotonic() < deadline:
         time.sleep(0.05)  # the first chunks are on disk
+    assert path.stat().st_size >= 20_000
     os.kill(child(process, "clnn_ros.nodes.recorder"), signal.SIGKILL)
     time.sleep(0.5)
     os.killpg(process.pid, signal.SIGINT)
