@@ -6,7 +6,8 @@ Each child gets a pipe on stdin that run_all never writes to (a node sees its en
 run_all is gone: nodes.common.EXIT_WITH_STDIN) and its stderr is read by a thread that passes
 each line on to run_all's stderr and keeps the last ones. The Fast DDS shared-memory files the
 children use are noted while they run, and removed after the end if no process uses them then
-(a killed process cannot remove its own): those of this run's processes, never another's.
+(a killed process cannot remove its own): those of this run's processes, never another's. If
+run_all itself is killed, clnn_ros.shm_janitor does that after the children have ended.
 """
 
 from __future__ import annotations
@@ -106,20 +107,37 @@ class Supervisor:
     def __init__(self):
         self.children: dict[str, Child] = {}
         self.shm_files: set[str] = set()
+        self._janitor = subprocess.Popen([sys.executable, "-m", "clnn_ros.shm_janitor"],
+                                         stdin=subprocess.PIPE, text=True, start_new_session=True)
+        self._janitor_lock = threading.Lock()
         self._stop_sampling = threading.Event()
         self._sampler = threading.Thread(target=self._sample, daemon=True, name="shm-sampler")
         self._sampler.start()
 
     def start(self, name: str, command: list[str], env: dict) -> Child:
         self.children[name] = child = Child(name, command, env)
+        self._tell_janitor(f"pid {child.process.pid}")
         return child
+
+    def _tell_janitor(self, *lines: str, last: bool = False) -> None:
+        with self._janitor_lock:  # the sampler thread and the main thread both tell it
+            try:
+                self._janitor.stdin.write("".join(line + "\n" for line in lines))
+                self._janitor.stdin.flush()
+                if last:
+                    self._janitor.stdin.close()
+            except OSError:
+                pass  # it died: run_all's own close still cleans up
 
     def _sample(self) -> None:
         while not self._stop_sampling.wait(SAMPLE_S):
+            known = set(self.shm_files)
             self.shm_files |= own_fast_dds_files(os.getpid())
             for child in list(self.children.values()):
                 if child.process.poll() is None:
                     child.shm_files |= own_fast_dds_files(child.process.pid)
+                    self.shm_files |= child.shm_files
+            self._tell_janitor(*(f"file {name}" for name in sorted(self.shm_files - known)))
 
     def first_failure(self, exclude: set[str]) -> Child | None:
         """A child (not in `exclude`) that exited with a non-zero status or a signal. Its own
@@ -164,4 +182,7 @@ class Supervisor:
         for child in self.children.values():
             child.close()
             self.shm_files |= child.shm_files
-        return remove_unused_fast_dds_files(self.shm_files)
+        problems = remove_unused_fast_dds_files(self.shm_files)
+        self._tell_janitor("done", last=True)
+        self._janitor.wait()
+        return problems

@@ -19,6 +19,7 @@ import pytest
 
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
+from clnn_ros.rosenv import fast_dds_shm_files, shm_files_in_use
 
 from test_graph import processes_with, wait_for_line
 from test_recording import assert_every_tick, child, raw_messages, start_run
@@ -155,17 +156,29 @@ def test_a_node_that_fails_at_start_ends_the_run_at_once(ros_env, tmp_path, comm
     assert not processes_with(str(tmp_path))
 
 
-def test_killing_run_all_ends_its_children(ros_env, tmp_path):
-    process = start_run(ros_env, tmp_path)
+def test_killing_run_all_ends_its_children(ros_env, tmp_path, in_private_shm):
+    """SIGKILL of run_all: its nodes end (stdin's end of file), the recorder finishes the bag,
+    and clnn_ros.shm_janitor removes the Fast DDS files they leave (listed, where allowed, in a
+    /dev/shm of the run's own once every process of the run has ended)."""
+    marker = {**ros_env, "CLNN_TEST_RUN": str(tmp_path), "LISTING": str(tmp_path / "shm.txt")}
+    shm_before = fast_dds_shm_files()
+    process = subprocess.Popen(
+        [*in_private_shm, sys.executable, str(Path(__file__).with_name("shm_listing.py")),
+         sys.executable, "-m", "clnn_ros.run_all", "--seed", "1", "--trials", "400", "--out",
+         str(tmp_path)], env=marker, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     wait_for_line(process.stdout, "trial    2/")
-    assert len(processes_with(str(tmp_path))) == 7  # run_all, 5 nodes, the recorder
-    process.kill()
-    process.wait()
-    deadline = time.monotonic() + 15
-    while processes_with(str(tmp_path)) and time.monotonic() < deadline:
-        time.sleep(0.2)
+    # run_all, 5 nodes, the recorder, the janitor and the listing script
+    assert len(processes_with(str(tmp_path))) == 9
+    os.kill(int((tmp_path / "shm.txt.pid").read_text()), signal.SIGKILL)
+    _, stderr = process.communicate(timeout=120)
     assert not processes_with(str(tmp_path))
     assert raw_messages(tmp_path / "run.mcap")  # the recorder finished the bag on its way out
+    if in_private_shm:
+        left = {name for name in (tmp_path / "shm.txt").read_text().split() if "fastrtps" in name}
+    else:  # a file of this run left over is new and used by no process
+        left = (fast_dds_shm_files() - shm_before) - shm_files_in_use()
+    assert not left, sorted(left)
+    assert "Traceback" not in stderr, stderr
 
 
 def test_a_second_graph_on_the_same_domain_and_namespace_is_refused(ros_env, tmp_path):
