@@ -4,7 +4,9 @@ import errno
 import fcntl
 import os
 import socket
+import signal
 import subprocess
+import time
 
 import pytest
 
@@ -61,3 +63,36 @@ def ros_environment(domain_id: str, tmp_path_factory) -> dict:
     ROS logs in a temporary folder."""
     return {**os.environ, "ROS_DOMAIN_ID": domain_id, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
             "ROS_LOG_DIR": str(tmp_path_factory.mktemp("ros_log"))}
+
+
+def processes_of_test(tmp_path) -> list[int]:
+    """PIDs of the processes a test started with CLNN_TEST_RUN set to its tmp_path or a folder
+    below it."""
+    mark, found = f"CLNN_TEST_RUN={tmp_path}".encode(), []
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            with open(f"/proc/{pid}/environ", "rb") as environ:
+                entries = environ.read().split(b"\0")
+        except OSError:
+            continue  # ended meanwhile, or not ours to read
+        if any(entry == mark or entry.startswith(mark + b"/") for entry in entries):
+            found.append(int(pid))
+    return found
+
+
+@pytest.fixture(autouse=True)
+def stop_what_the_test_left_running(tmp_path):
+    """A test that failed half-way leaves its run going; on the module's domain the next test's
+    run would then be refused as a second graph (and fail for that). So after each test, what
+    it left is interrupted (Ctrl-C), and killed if it is still there 30 s later."""
+    yield
+    for signum, wait_s in ((signal.SIGINT, 30.0), (signal.SIGKILL, 10.0)):
+        pids = processes_of_test(tmp_path)
+        for pid in pids:
+            try:
+                os.kill(pid, signum)
+            except ProcessLookupError:
+                pass
+        deadline = time.monotonic() + wait_s
+        while pids and processes_of_test(tmp_path) and time.monotonic() < deadline:
+            time.sleep(0.1)
