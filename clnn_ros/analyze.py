@@ -61,8 +61,6 @@ def run_parameters(reader) -> tuple[Params, dict]:
     except Exception:  # no readable parameters: the paper's defaults
         pass
     model = {k: v for k, v in given.items() if k not in RUN_SETTINGS}
-    if model.get("segments") == 0:
-        model.pop("segments")
     try:
         return params_from_strings(model), given
     except ParamError:
