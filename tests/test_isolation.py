@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from clnn_ros import bag
+from clnn_ros import bag, names
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
 from clnn_ros.names import STATE
@@ -131,7 +131,7 @@ def recorded(out: Path) -> dict[str, list]:
     from rclpy.serialization import deserialize_message
     by_topic = defaultdict(list)
     for _, topic, publish_time, _, data, _ in raw_messages(out / "run.mcap"):
-        message_type = bag.message_class(bag.TOPIC_TYPES[topic])
+        message_type = bag.message_class(names.TOPIC_TYPES[topic])
         by_topic[topic].append((publish_time, deserialize_message(data, message_type)))
     return dict(by_topic)
 
@@ -159,7 +159,7 @@ def test_three_runs_of_a_seed_are_bit_identical(default_run, subnet_run, concurr
     same final weights file and the same recorded messages on every topic."""
     runs = [default_run[0], subnet_run[0], concurrent_runs[0][0]]
     first = recorded(runs[0])
-    assert set(first) == set(bag.TOPIC_TYPES) and len(first[STATE]) > TRIALS
+    assert set(first) == set(names.TOPIC_TYPES) and len(first[STATE]) > TRIALS
     for out in runs[1:]:
         assert (out / "trials.csv").read_bytes() == (runs[0] / "trials.csv").read_bytes()
         assert (out / "final_weights.npy").read_bytes() == \

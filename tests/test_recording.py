@@ -107,8 +107,8 @@ def test_bag_layout_is_rosbag2(recorded):
         summary = reader.get_summary()
         metadata = {m.name: m.metadata for m in reader.iter_metadata()}
     channels = {names.graph_topic(c.topic): c for c in summary.channels.values()}
-    assert {c.topic for c in channels.values()} == {names.absolute(t) for t in bag.TOPIC_TYPES}
-    for topic, type_name in bag.TOPIC_TYPES.items():
+    assert {c.topic for c in channels.values()} == {names.absolute(t) for t in names.TOPIC_TYPES}
+    for topic, type_name in names.TOPIC_TYPES.items():
         channel = channels[topic]
         schema = summary.schemas[channel.schema_id]
         assert channel.message_encoding == "cdr" and schema.encoding == "ros2msg"
@@ -188,10 +188,10 @@ def test_two_independent_readers_decode_every_field(recorded):
                 by_rosbags[(topic, index)] = fields_of(
                     reader.deserialize(data, connection.msgtype))
     assert set(by_rosbags) == set(by_mcap)
-    assert {t for t, _ in by_mcap} == set(bag.TOPIC_TYPES)
+    assert {t for t, _ in by_mcap} == set(names.TOPIC_TYPES)
     for (topic, index), fields in by_mcap.items():
         installed = fields_of(deserialize_message(raw[(topic, index)],
-                                                  bag.message_class(bag.TOPIC_TYPES[topic])))
+                                                  bag.message_class(names.TOPIC_TYPES[topic])))
         assert fields == installed, (topic, index)
         assert by_rosbags[(topic, index)] == installed, (topic, index)
         if "tick" in fields:
@@ -232,7 +232,7 @@ def test_echo_topics_then_ctrl_c_leaves_a_complete_bag(ros_env, tmp_path):
     assert listed.returncode == 0
     # The model's topics, and ROS's own: the plumbing is hidden (names with a part "_...").
     assert sorted(listed.stdout.splitlines()) == sorted(
-        [f"{names.absolute(topic)} [{type_name}]" for topic, type_name in bag.TOPIC_TYPES.items()]
+        [f"{names.absolute(topic)} [{type_name}]" for topic, type_name in names.TOPIC_TYPES.items()]
         + ["/parameter_events [rcl_interfaces/msg/ParameterEvent]",
            "/rosout [rcl_interfaces/msg/Log]"])
     hidden = tool(ros_env, "clnn_ros.topics", "--include-hidden-topics")

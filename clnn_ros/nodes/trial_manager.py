@@ -41,6 +41,7 @@ from std_msgs.msg import String, UInt64
 from ..core.episode import seed_setup
 from ..files import describe_write_error, write_atomically, write_text_atomically
 from ..init_weights import episode_start
+from ..message_fields import REACHED_MAX_STEPS, TRIALS_CSV_HEADER
 from ..names import (ACTION, CLOCK, GRAPH_NODES, NOT_STARTED, PUBLISHED_BY, READY, RECORDED,
                      RECORDER, REWARD,
                      SPIKES, STATE, TRIAL_EVENT, TRIAL_MANAGER, WEIGHTS)
@@ -251,7 +252,7 @@ class TrialManagerNode(GraphNode):
         if action.force_direction != 0:
             self.advance(tick + 1, starts_trial=False)
             return
-        reason = state.failure_reason or "max_steps"
+        reason = state.failure_reason or REACHED_MAX_STEPS
         self.trial_end_tick = tick
         self.results.append((self.trial, float(self.angles[self.trial]), state.successful_steps,
                              reason))
@@ -315,7 +316,7 @@ class TrialManagerNode(GraphNode):
     def write_trials(self, out: Path) -> None:
         text = io.StringIO()
         writer = csv.writer(text)
-        writer.writerow(["seed", "trial", "initial_angle_deg", "steps", "end_reason"])
+        writer.writerow(TRIALS_CSV_HEADER)
         writer.writerows([self.settings["seed"], *r] for r in self.results)
         write_text_atomically(out / "trials.csv", text.getvalue())
 
