@@ -35,7 +35,7 @@ from clnn_ros_msgs.msg import (
 from clnn_ros import message_fields
 from clnn_ros.core.physics import CONTINUE, FAIL_ANGLE, FAIL_POSITION
 
-pytestmark = pytest.mark.ros
+pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
                  durability=DurabilityPolicy.VOLATILE)
 # Domains 0..232 work with Fast DDS; keep this module's in its own slice of them.

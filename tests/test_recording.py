@@ -83,6 +83,7 @@ def assert_every_tick(messages, topics=PER_TICK, last_state_tick=None, tail_allo
 
 # --- the recorded run and its analysis ---------------------------------------------------------
 
+@pytest.mark.ros
 def test_analysis_equals_the_live_run(recorded):
     analysis = recorded / "analysis"
     assert (analysis / "trials.csv").read_text() == (recorded / "trials.csv").read_text()
@@ -98,6 +99,7 @@ def test_analysis_equals_the_live_run(recorded):
     assert "EPISODE_END, `completed`" in summary
 
 
+@pytest.mark.ros
 def test_bag_layout_is_rosbag2(recorded):
     """Schemas, hashes, QoS and the rosbag2 metadata record, as ros2 bag writes them."""
     from mcap.reader import make_reader
@@ -157,6 +159,7 @@ def fields_of(msg) -> dict:
             if not n.isupper() and n != "__msgtype__"}
 
 
+@pytest.mark.ros
 def test_two_independent_readers_decode_every_field(recorded):
     """mcap_ros2 and rosbags, each from the schemas in the bag, agree field by field with the
     installed message types on sampled messages of every topic."""
@@ -223,6 +226,7 @@ def tool(env, module, *args, timeout=30):
                           text=True, timeout=timeout)
 
 
+@pytest.mark.ros
 def test_echo_topics_then_ctrl_c_leaves_a_complete_bag(ros_env, tmp_path):
     """Against a live graph: clnn_ros.topics and clnn_ros.echo (YAML, --field, --raster, Ctrl-C,
     an unknown topic); then Ctrl-C to the whole run leaves a finished bag."""
@@ -276,6 +280,7 @@ def test_echo_topics_then_ctrl_c_leaves_a_complete_bag(ros_env, tmp_path):
     assert not processes_with(str(tmp_path))
 
 
+@pytest.mark.ros
 def test_killed_recorder_leaves_its_complete_chunks(ros_env, tmp_path):
     process = start_run(ros_env, tmp_path)
     path = tmp_path / "run.mcap"
@@ -306,6 +311,7 @@ def analyze(*args):
                           capture_output=True, text=True, timeout=60)
 
 
+@pytest.mark.ros
 def test_analyze_refuses_bad_bags_with_one_line(recorded, tmp_path):
     good = recorded / "run.mcap"
     truncated = tmp_path / "truncated.mcap"
@@ -343,6 +349,7 @@ def test_sample_bag_analysis(tmp_path):
         (tmp_path / "summary.md").read_text()
 
 
+@pytest.mark.ros
 def test_sigterm_stops_a_recorder_that_recorded_nothing(ros_env, tmp_path):
     """A recorder alone (no graph yet) told to stop with SIGTERM: a clean exit, and no bag,
     since nothing was recorded."""

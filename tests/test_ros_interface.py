@@ -24,6 +24,7 @@ from test_faults import error_lines
 
 from conftest import free_domain_id, ros_environment
 
+pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 DOMAIN_ID = free_domain_id()
 
 
