@@ -26,15 +26,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .bag import TOPIC_TYPES, BagError, Decoder, iter_raw, open_bag
+from .bag import BagError, Decoder, iter_raw, open_bag
 from .cli import OneLineArgumentParser
 from .core.params import ParamError, Params, params_from_strings
-from .names import (ACTION, CLOCK, REWARD, RUN_SETTINGS, SPIKES, STATE, TRIAL_EVENT,
-                    WEIGHTS, absolute)
+from .message_fields import (END, END_REASONS, EPISODE_END, REACHED_MAX_STEPS, START,
+                             TRIALS_CSV_HEADER)
+from .names import (ACTION, PER_TICK, RUN_SETTINGS, SPIKES, STATE, TOPIC_TYPES,
+                    TRIAL_EVENT, WEIGHTS, absolute)
 
-TRIALS_HEADER = ["seed", "trial", "initial_angle_deg", "steps", "end_reason"]
-START, END, EPISODE_END = 0, 1, 2
-TICK_TOPICS = (CLOCK, STATE, SPIKES, REWARD, ACTION)  # one message per tick
 
 
 class UsageError(Exception):
@@ -61,8 +60,6 @@ def run_parameters(reader) -> tuple[Params, dict]:
     except Exception:  # no readable parameters: the paper's defaults
         pass
     model = {k: v for k, v in given.items() if k not in RUN_SETTINGS}
-    if model.get("segments") == 0:
-        model.pop("segments")
     try:
         return params_from_strings(model), given
     except ParamError:
@@ -78,7 +75,7 @@ def read_bag(path: Path, salvage: bool):
         tau_ns = round(params.tau * 1e9)
         decode = Decoder()
         events, weights = [], []
-        ticks = {topic: [] for topic in TICK_TOPICS}
+        ticks = {topic: [] for topic in PER_TICK}
         raw = {STATE: {}, SPIKES: {}, ACTION: {}}
         schemas = {}
         counts = {topic: 0 for topic in TOPIC_TYPES}
@@ -108,7 +105,7 @@ def trial_rows(events) -> list[list]:
 def write_trials(rows, path: Path) -> None:
     with open(path, "w", newline="") as f:
         writer = csv.writer(f)
-        writer.writerow(TRIALS_HEADER)
+        writer.writerow(TRIALS_CSV_HEADER)
         writer.writerows(rows)
 
 
@@ -131,7 +128,7 @@ def plot_learning_curve(rows, path: Path, max_steps: int, title: str) -> None:
     fig, ax = plt.subplots(figsize=(9, 3.8), constrained_layout=True)
     trials = np.array([r[1] for r in rows])
     steps = np.array([r[3] for r in rows])
-    codes = {"max_steps": 0, "pole_angle": 1, "cart_position": 2}
+    codes = {reason: status for status, reason in enumerate(END_REASONS)}
     labels = {0: "reached the step cap", 1: "failed: pole angle", 2: "failed: cart position"}
     colors = np.array([codes.get(r[4], 1) for r in rows])
     ax.plot(trials, steps, color="tab:gray", linewidth=0.8)
@@ -208,7 +205,7 @@ def analyze(bag_path: Path, out: Path, trial: int | None, salvage: bool) -> dict
                            s.pole_angular_velocity_deg_per_s) for s in states])
         chosen = {"trial": trial, "start": start, "end": end, "ticks": len(ticks),
                   "steps": states[-1].successful_steps if states else 0,
-                  "end_reason": (states[-1].failure_reason or "max_steps") if states else ""}
+                  "end_reason": (states[-1].failure_reason or REACHED_MAX_STEPS) if states else ""}
         if len(trace):
             plot_trace(trace, 0, out / "traces.png",
                        f"Trial {trial} from the bag: ticks {start}-{end} "

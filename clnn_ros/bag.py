@@ -25,7 +25,8 @@ from pathlib import Path
 
 import yaml
 
-from .names import TOPIC_TYPES, graph_topic
+from .names import graph_topic
+
 CHUNK_SIZE = 512 * 1024  # about 1,000 ticks of the graph per chunk
 ROSBAG2_VERSION = 9      # the bag format of ROS 2 Jazzy
 PRIMITIVES = {"bool", "byte", "char", "float32", "float64", "int8", "uint8", "int16", "uint16",
@@ -227,8 +228,3 @@ class Decoder:
             decoder = self.decoders[schema.id] = self.factory.decoder_for("cdr", schema)
         return decoder(cdr)
 
-
-def deserialize(topic: str, cdr: bytes):
-    """Decode with the installed message type (rclpy, fast)."""
-    from rclpy.serialization import deserialize_message
-    return deserialize_message(cdr, message_class(TOPIC_TYPES[topic]))

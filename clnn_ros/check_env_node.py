@@ -40,6 +40,7 @@ from std_msgs.msg import String
 
 from clnn_ros_msgs.msg import Action, CartPoleState, TrialEvent
 
+from .cli import OneLineArgumentParser
 from .names import ACTION, CLOCK, READY, STATE, TOPIC_TYPES, TRIAL_EVENT, absolute
 from .nodes.common import EXIT_WITH_STDIN, LOCKSTEP_QOS, READY_QOS
 
@@ -573,8 +574,8 @@ def namespace_argument(text: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m clnn_ros.check_env_node",
-                                     description=__doc__.split("\n\n")[0])
+    parser = OneLineArgumentParser(prog="python -m clnn_ros.check_env_node",
+                                   name="check_env_node", description=__doc__.split("\n\n")[0])
     parser.add_argument("--domain-id", type=int, default=150 + os.getpid() % 80,
                         help="private ROS_DOMAIN_ID for the check (default: 150 + pid %% 80)")
     parser.add_argument("--namespace", type=namespace_argument, default="/check_env_node",

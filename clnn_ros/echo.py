@@ -20,18 +20,12 @@ import time
 
 from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
 
-import rclpy
 import yaml
-from rclpy.exceptions import InvalidTopicNameException
-from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rclpy.validate_topic_name import validate_topic_name
 
-from .bag import TOPIC_TYPES, message_class
+from . import qos
+from .bag import message_class
 from .cli import OneLineArgumentParser
-from .names import absolute, graph_topic
-from .nodes.common import ros_session
-
-ECHO_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+from .names import TOPIC_TYPES, absolute, graph_topic
 
 
 class EchoError(Exception):
@@ -130,6 +124,9 @@ class Raster:
 def topic_type(node, topic: str, wait_s: float) -> str:
     """The graph's topics in any namespace are known without discovery, which can take seconds
     on a loaded machine; any other topic must be discovered within wait_s."""
+    import rclpy
+    from rclpy.exceptions import InvalidTopicNameException
+    from rclpy.validate_topic_name import validate_topic_name
     try:
         validate_topic_name(topic)
     except InvalidTopicNameException as error:
@@ -161,6 +158,8 @@ def main(argv=None) -> int:
     parser.add_argument("--wait", type=float, default=3.0,
                         help="seconds to wait for a topic that is not one of the graph's (3)")
     args = parser.parse_args(argv)
+    import rclpy  # after the arguments: --help and a usage error need no ROS
+    from .nodes.common import qos_profile, ros_session
     with ros_session() as received:
         node = rclpy.create_node("echo", start_parameter_services=False, enable_rosout=False)
         try:
@@ -185,7 +184,7 @@ def main(argv=None) -> int:
                 sys.stdout.flush()
                 printed.append(1)
 
-            node.create_subscription(cls, args.topic, show, ECHO_QOS)
+            node.create_subscription(cls, args.topic, show, qos_profile(qos.ECHO))
             while not received and not (args.once and printed):
                 rclpy.spin_once(node, timeout_sec=0.1)
             return 128 + received[0] if received else 0

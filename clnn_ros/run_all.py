@@ -32,9 +32,9 @@ import yaml
 from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
 
 from .cli import OneLineArgumentParser
-from .core.checkpoint import OPTIMAL, Checkpoint, load_checkpoint
-from .core.episode import start_from_setting
+from .core.checkpoint import Checkpoint, load_checkpoint
 from .core.params import ParamError, Params, params_from_strings
+from .init_weights import OPTIMAL, episode_start
 from .names import GRAPH_NODES, NOT_STARTED, RECORDER, RUN_SETTINGS, TRIAL_MANAGER
 from .nodes.common import EXIT_WITH_STDIN, catch_signals
 from .nodes.parameters import convert_setting, read_params_file
@@ -202,7 +202,7 @@ def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
     for key in set(values) & set(RUN_SETTINGS):
         values[key] = convert_setting(key, values[key])
     # what each node will do with init_weights, here first: one line for what does not fit
-    start_from_setting(values["seed"], params, values.get("init_weights", ""))
+    episode_start(values.get("init_weights", ""), values["seed"], params)
     return values
 
 

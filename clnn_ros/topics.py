@@ -14,10 +14,7 @@ import time
 
 from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
 
-import rclpy
-
 from .cli import OneLineArgumentParser
-from .nodes.common import ros_session
 
 OWN = {"/parameter_events", "/rosout"}  # this tool's own node has these
 
@@ -38,6 +35,8 @@ def main(argv=None) -> int:
     parser.add_argument("--include-hidden-topics", action="store_true",
                         help="also the plumbing (names with a part starting with _)")
     args = parser.parse_args(argv)
+    import rclpy  # after the arguments: --help and a usage error need no ROS
+    from .nodes.common import ros_session
     with ros_session() as received:
         node = rclpy.create_node("topics", start_parameter_services=False, enable_rosout=False)
         try:

@@ -23,7 +23,8 @@ the ring's, the benchmark's own).
    publishes once it holds its inputs of the tick, as the graph's nodes do. std_msgs/UInt64
    messages (the transport yardstick) and the graph's own message types with fixed content.
    The ring runs under the same rosenv defaults (its Fast DDS profile file), with the graph's
-   QoS object (clnn_ros.nodes.common.LOCKSTEP_QOS, depth 2000) and the graph's executor
+   QoS object (clnn_ros.nodes.common.LOCKSTEP_QOS, from clnn_ros.qos.LOCKSTEP; the report
+   states its depth) and the graph's executor
    factory (clnn_ros.nodes.common.make_executor, CLNN_ROS_EXECUTOR). EventsExecutor (the
    default) and rclpy's SingleThreadedExecutor (CLNN_ROS_EXECUTOR=single). Every configuration
    runs REPEATS times, round robin; the best (highest) rate counts, the least disturbed by other
@@ -65,6 +66,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+from clnn_ros import qos
 
 REPO = Path(__file__).resolve().parents[1]
 SEED = 1
@@ -950,6 +953,12 @@ def main_benchmark(a) -> int:
 
 # ----------------------------------------------------------------------------- report
 
+def qos_text(description: qos.Qos) -> str:
+    """'RELIABLE, KEEP_LAST 2000, VOLATILE': a QoS description as the report states it."""
+    return (f"{description.reliability.upper()}, {description.history.upper()} "
+            f"{description.depth}, {description.durability.upper()}")
+
+
 def fmt_rate(best: float, rates: list[float]) -> str:
     if len(rates) > 1:
         return f"{best:.0f} ({min(rates):.0f}-{max(rates):.0f})"
@@ -1019,7 +1028,7 @@ def report(rows, paced, ser, composed, separate, sizes, quick, elapsed, loads, s
         "trial manager, action to environment + trial manager: 5 publications and 10 "
         "deliveries per tick, 4 hops on the critical path; each node publishes once it holds "
         "its inputs of the tick, as in the graph. The graph's QoS object "
-        "(`LOCKSTEP_QOS`: RELIABLE, KEEP_LAST 2000, VOLATILE) and executor factory "
+        f"(`LOCKSTEP_QOS`: {qos_text(qos.LOCKSTEP)}) and executor factory "
         "(`make_executor`). *UInt64*: std_msgs/UInt64 messages (the transport alone); "
         "*typed*: the graph's own message types with fixed content (transport + "
         "serialization of the real messages; no model, no message construction). Ticks: "

@@ -117,6 +117,7 @@ SUBPROCESS_CASES = {"--seed abc", "--trials 0", "--out file.txt", "--bag file.tx
 NODE_CASES = [  # (node, its arguments after --ros-args, what the one error line says)
     ("agent", ["-p", "omega:=-5"], "omega must be a positive integer below 2**31, got -5"),
     ("agent", ["-p", "sigmaa:=3"], "unknown parameter 'sigmaa'"),
+    ("reward", ["-p", "segments:=0"], "segments must be an integer from 1 to 64, got 0"),
     ("agent", ["-p", "sigma:=abc"], "sigma must be an integer, got 'abc'"),
     ("agent", ["-p", "sigma"], "Couldn't parse parameter override rule: '-p sigma'"),
     ("agent", ["-p", "seed:=1.5"], "seed must be an integer from 0 to 2**32-1, got 1.5"),
@@ -197,6 +198,7 @@ def test_every_subprocess_case_is_a_case():
     assert SUBPROCESS_CASES <= {" ".join(args) for args, _ in RUN_ALL_CASES}
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize("node, ros_args, message", NODE_CASES,
                          ids=[f"{n} {' '.join(a)}" for n, a, _ in NODE_CASES])
 def test_a_node_started_by_hand_refuses_bad_parameters(workdir, node, ros_args, message):

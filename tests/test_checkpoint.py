@@ -12,12 +12,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from clnn_ros.core.checkpoint import (FORMAT, CheckpointError, load_checkpoint, load_weights,
-                                      save_checkpoint)
-from clnn_ros.core.episode import run_episode, start_from_setting
+from clnn_ros.core.checkpoint import FORMAT, CheckpointError, load_checkpoint, save_checkpoint
+from clnn_ros.core.episode import run_episode
 from clnn_ros.core.optimal import optimal_weights
 from clnn_ros.core.params import Params
 from clnn_ros.core.physics import CONTINUE
+from clnn_ros.init_weights import EpisodeStart, episode_start, load_weights
 
 from conftest import free_domain_id, ros_environment
 from test_graph import run_all
@@ -72,17 +72,22 @@ def test_core_resume_needs_the_random_stream_and_the_carried_count():
 
 
 def test_init_weights_sources(tmp_path):
-    p = Params(trials=4, max_steps=400)
-    np.testing.assert_array_equal(start_from_setting(SEED, p, "fig7")[0].weights,
-                                  optimal_weights(1))
-    np.testing.assert_array_equal(start_from_setting(SEED, Params(nsv=2), "fig12")[0].weights,
+    p = Params(trials=4, max_steps=400, **CARRY)
+    np.testing.assert_array_equal(episode_start("fig7", SEED, p).weights, optimal_weights(1))
+    np.testing.assert_array_equal(episode_start("fig12", SEED, Params(nsv=2)).weights,
                                   optimal_weights(2))
-    learned = run_episode(SEED, p).final_weights
-    np.save(tmp_path / "w.npy", learned)
-    agent, _, first_trial = start_from_setting(SEED, p, str(tmp_path / "w.npy"))
-    np.testing.assert_array_equal(agent.weights, learned)
-    assert first_trial == 0
-    np.save(tmp_path / "big.npy", learned + 8)
+    assert episode_start("", SEED, p) == EpisodeStart()  # the seed's weights
+    episode = run_episode(SEED, p)
+    np.save(tmp_path / "w.npy", episode.final_weights)
+    start = episode_start(str(tmp_path / "w.npy"), SEED, p)
+    np.testing.assert_array_equal(start.weights, episode.final_weights)
+    assert start.first_trial == 0 and start.success_counter(p).count == 0
+    # what the reward node and the trial manager take from a checkpoint, without an agent
+    save_checkpoint(tmp_path / "c.npz", episode.checkpoint)
+    resumed = episode_start(str(tmp_path / "c.npz"), SEED, p.replace(trials=8))
+    assert resumed.weights is None and resumed.first_trial == 4
+    assert resumed.success_counter(p).count == episode.checkpoint.success_count > 0
+    np.save(tmp_path / "big.npy", episode.final_weights + 8)
     with pytest.raises(CheckpointError, match=r"values must lie in \[0, w_max=8\]"):
         load_weights(str(tmp_path / "big.npy"), p)
 
@@ -110,6 +115,7 @@ def bad_files(tmp: Path) -> list[tuple[list[str], str]]:
     ]
 
 
+@pytest.mark.ros
 def test_bad_init_weights_stop_run_all_before_any_node_starts(ros_env, tmp_path):
     for args, message in bad_files(tmp_path):
         result = run_all(ros_env, "--no-record", "--init-weights", *args, timeout=30)
@@ -119,6 +125,7 @@ def test_bad_init_weights_stop_run_all_before_any_node_starts(ros_env, tmp_path)
         assert "run_all: seed" not in result.stdout  # printed just before the nodes start
 
 
+@pytest.mark.ros
 def test_graph_resumed_episode_equals_the_uninterrupted_one(ros_env, tmp_path):
     """12 trials in one run == 6 trials, then a resume from <out>/checkpoint.npz to 12 (in
     separate processes, then composed); with the random tie-break and a carried success count."""
@@ -140,6 +147,7 @@ def test_graph_resumed_episode_equals_the_uninterrupted_one(ros_env, tmp_path):
     assert load_checkpoint(rest / "checkpoint.npz").next_trial == 12
 
 
+@pytest.mark.ros
 def test_graph_fig7_weights_equal_the_core_and_the_save_service(ros_env, tmp_path):
     """A new episode from the Figure 7 weights, learning on, equals the core's (true physics:
     the pole falls now and then, so the weights learn); during it the agent's service saves a

@@ -27,6 +27,7 @@ from clnn_ros.core.params import ParamError, Params, params_from_strings
 
 from conftest import free_domain_id
 
+pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 ROOT = Path(__file__).resolve().parents[1]
 BROKEN = str(Path(__file__).with_name("broken_env_node.py"))
 PY = sys.executable

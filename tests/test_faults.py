@@ -26,6 +26,7 @@ from test_recording import assert_every_tick, child, raw_messages, start_run
 
 from conftest import free_domain_id, ros_environment
 
+pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 DOMAIN_ID = free_domain_id()
 PROCESSES = ("environment", "encoder", "reward", "agent", "recorder", "trial_manager")
 BROKEN = Path(__file__).with_name("broken_env_node.py")

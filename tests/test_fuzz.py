@@ -23,6 +23,7 @@ from clnn_ros.core.params import Params
 
 from conftest import free_domain_id
 
+pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 DOMAIN_ID = free_domain_id()
 FUZZER = Path(__file__).parents[1] / "scripts" / "fuzz_graph.py"
 # GraphNode.refusal_summary, logged once at exit:

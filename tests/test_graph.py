@@ -21,6 +21,7 @@ from clnn_ros.rosenv import fast_dds_shm_files, processes_with_env, shm_files_in
 
 from conftest import free_domain_id, ros_environment
 
+pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 DOMAIN_ID = free_domain_id()
 
 

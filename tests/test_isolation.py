@@ -1,12 +1,12 @@
 """Repeatability and isolation of the real graph, and the graph spread over two hosts.
 
 Every run here happens inside a private network namespace that has lo and one end of a veth link
-(clnn_ros.two_hosts.veth_link), so the kernel's packet counter of that link shows whether DDS sent
+(clnn_ros.lab.two_hosts.veth_link), so the kernel's packet counter of that link shows whether DDS sent
 anything off loopback. Three runs of one seed are bit-identical (results and every recorded
 message); with the default settings nothing leaves loopback, with ROS_AUTOMATIC_DISCOVERY_RANGE=
 SUBNET (the control) packets do; two graphs started at once on two domain ids do not see each
 other; the environment node across the link gives the one-host results (python -m
-clnn_ros.two_hosts)."""
+clnn_ros.lab.two_hosts)."""
 
 from __future__ import annotations
 
@@ -22,11 +22,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from clnn_ros import bag
+from clnn_ros import bag, names
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
 from clnn_ros.names import STATE
-from clnn_ros.two_hosts import veth_link
+from clnn_ros.lab.two_hosts import veth_link
 
 from test_graph import processes_with, read_steps, wait_for_line
 from test_recording import assert_every_tick, raw_messages
@@ -49,8 +49,9 @@ def namespaces_missing() -> str | None:
 
 
 NAMESPACES_MISSING = namespaces_missing()
-pytestmark = pytest.mark.skipif(NAMESPACES_MISSING is not None,
-                                reason=f"{NAMESPACES_MISSING}: no namespace tests")
+pytestmark = [pytest.mark.ros,  # every test here starts ROS / DDS (or two_hosts)
+              pytest.mark.skipif(NAMESPACES_MISSING is not None,
+                                 reason=f"{NAMESPACES_MISSING}: no namespace tests")]
 
 
 @pytest.fixture(scope="module")
@@ -131,7 +132,7 @@ def recorded(out: Path) -> dict[str, list]:
     from rclpy.serialization import deserialize_message
     by_topic = defaultdict(list)
     for _, topic, publish_time, _, data, _ in raw_messages(out / "run.mcap"):
-        message_type = bag.message_class(bag.TOPIC_TYPES[topic])
+        message_type = bag.message_class(names.TOPIC_TYPES[topic])
         by_topic[topic].append((publish_time, deserialize_message(data, message_type)))
     return dict(by_topic)
 
@@ -159,7 +160,7 @@ def test_three_runs_of_a_seed_are_bit_identical(default_run, subnet_run, concurr
     same final weights file and the same recorded messages on every topic."""
     runs = [default_run[0], subnet_run[0], concurrent_runs[0][0]]
     first = recorded(runs[0])
-    assert set(first) == set(bag.TOPIC_TYPES) and len(first[STATE]) > TRIALS
+    assert set(first) == set(names.TOPIC_TYPES) and len(first[STATE]) > TRIALS
     for out in runs[1:]:
         assert (out / "trials.csv").read_bytes() == (runs[0] / "trials.csv").read_bytes()
         assert (out / "final_weights.npy").read_bytes() == \
@@ -182,11 +183,11 @@ def test_two_graphs_at_once_on_two_domains_do_not_see_each_other(concurrent_runs
 
 
 def test_environment_on_another_host_equals_one_host(base_env, tmp_path):
-    """python -m clnn_ros.two_hosts: the environment node in its own namespace, reached over
+    """python -m clnn_ros.lab.two_hosts: the environment node in its own namespace, reached over
     the veth link with SUBNET discovery; both runs equal the core and the link carried every
     tick's state."""
     before = our_namespaces()
-    run = subprocess.run([sys.executable, "-m", "clnn_ros.two_hosts", "--seed", "1", "--trials",
+    run = subprocess.run([sys.executable, "-m", "clnn_ros.lab.two_hosts", "--seed", "1", "--trials",
                           str(TRIALS), "--max-steps", str(MAX_STEPS), "--out", str(tmp_path)],
                          env={**base_env, "ROS_DOMAIN_ID": DOMAIN_IDS[0]}, capture_output=True,
                          text=True, timeout=2 * RUN_TIMEOUT_S)
@@ -208,7 +209,7 @@ def test_ctrl_c_across_the_link_removes_everything(base_env, tmp_path):
     stderr_file = tmp_path / "stderr.log"  # a file: no pipe to fill while we read stdout
     with open(stderr_file, "w") as stderr_log:
         process = subprocess.Popen(
-            [sys.executable, "-m", "clnn_ros.two_hosts", "--trials", "400", "--max-steps", "10000"],
+            [sys.executable, "-m", "clnn_ros.lab.two_hosts", "--trials", "400", "--max-steps", "10000"],
             env=marker, stdout=subprocess.PIPE, stderr=stderr_log, text=True,
             start_new_session=True)
     try:
@@ -232,7 +233,7 @@ def test_ctrl_c_across_the_link_removes_everything(base_env, tmp_path):
 ])
 def test_two_hosts_refuses_bad_input_before_any_namespace(args, message):
     before = our_namespaces()
-    run = subprocess.run([sys.executable, "-m", "clnn_ros.two_hosts", *args], capture_output=True,
+    run = subprocess.run([sys.executable, "-m", "clnn_ros.lab.two_hosts", *args], capture_output=True,
                          text=True, timeout=30)
     assert run.returncode == 2
     assert run.stderr.startswith("two_hosts: error: ") and message in run.stderr

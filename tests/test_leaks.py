@@ -8,9 +8,12 @@ import subprocess
 import sys
 from pathlib import Path
 
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "leak_check.py"
+import pytest
+
 from conftest import free_domain_id
 
+pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
+SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "leak_check.py"
 DOMAIN_ID = free_domain_id()
 
 

@@ -21,6 +21,7 @@ from test_graph import processes_with, read_steps
 
 from conftest import free_domain_id, ros_environment
 
+pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 DOMAIN_ID = free_domain_id()
 MAX_STEPS = 600
 # seed: trials for 2,000-2,600 ticks at MAX_STEPS (core.run_episode)

@@ -32,6 +32,10 @@ from clnn_ros_msgs.msg import (
     WeightSnapshot,
 )
 
+from clnn_ros import message_fields
+from clnn_ros.core.physics import CONTINUE, FAIL_ANGLE, FAIL_POSITION
+
+pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
                  durability=DurabilityPolicy.VOLATILE)
 # Domains 0..232 work with Fast DDS; keep this module's in its own slice of them.
@@ -129,12 +133,17 @@ def test_definitions():
     }
     for cls, fields in expected.items():
         assert cls.get_fields_and_field_types() == {**common, **fields}, cls.__name__
-    assert (TrialEvent.START, TrialEvent.END, TrialEvent.EPISODE_END) == (0, 1, 2)
+    assert (TrialEvent.START, TrialEvent.END, TrialEvent.EPISODE_END) == (0, 1, 2) == \
+        (message_fields.START, message_fields.END, message_fields.EPISODE_END)
     assert (Action.FORCE_NEGATIVE, Action.FORCE_POSITIVE) == (-1, 1)
     assert (Action.NEURON_NEGATIVE_FORCE, Action.NEURON_POSITIVE_FORCE) == (0, 1)
     assert (Reward.KIND_REWARD, Reward.KIND_PUNISH, Reward.KIND_NONE) == ("reward", "punish", "none")
     assert (CartPoleState.FAILURE_NONE, CartPoleState.FAILURE_POLE_ANGLE,
             CartPoleState.FAILURE_CART_POSITION) == ("", "pole_angle", "cart_position")
+    reasons = message_fields.FAILURE_REASONS
+    assert (reasons[CONTINUE], reasons[FAIL_ANGLE], reasons[FAIL_POSITION]) == (
+        CartPoleState.FAILURE_NONE, CartPoleState.FAILURE_POLE_ANGLE,
+        CartPoleState.FAILURE_CART_POSITION)
     assert list(Reward().reward_one_hot) == [0, 0]
 
 

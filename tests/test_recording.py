@@ -83,6 +83,7 @@ def assert_every_tick(messages, topics=PER_TICK, last_state_tick=None, tail_allo
 
 # --- the recorded run and its analysis ---------------------------------------------------------
 
+@pytest.mark.ros
 def test_analysis_equals_the_live_run(recorded):
     analysis = recorded / "analysis"
     assert (analysis / "trials.csv").read_text() == (recorded / "trials.csv").read_text()
@@ -98,6 +99,7 @@ def test_analysis_equals_the_live_run(recorded):
     assert "EPISODE_END, `completed`" in summary
 
 
+@pytest.mark.ros
 def test_bag_layout_is_rosbag2(recorded):
     """Schemas, hashes, QoS and the rosbag2 metadata record, as ros2 bag writes them."""
     from mcap.reader import make_reader
@@ -107,8 +109,8 @@ def test_bag_layout_is_rosbag2(recorded):
         summary = reader.get_summary()
         metadata = {m.name: m.metadata for m in reader.iter_metadata()}
     channels = {names.graph_topic(c.topic): c for c in summary.channels.values()}
-    assert {c.topic for c in channels.values()} == {names.absolute(t) for t in bag.TOPIC_TYPES}
-    for topic, type_name in bag.TOPIC_TYPES.items():
+    assert {c.topic for c in channels.values()} == {names.absolute(t) for t in names.TOPIC_TYPES}
+    for topic, type_name in names.TOPIC_TYPES.items():
         channel = channels[topic]
         schema = summary.schemas[channel.schema_id]
         assert channel.message_encoding == "cdr" and schema.encoding == "ros2msg"
@@ -157,6 +159,7 @@ def fields_of(msg) -> dict:
             if not n.isupper() and n != "__msgtype__"}
 
 
+@pytest.mark.ros
 def test_two_independent_readers_decode_every_field(recorded):
     """mcap_ros2 and rosbags, each from the schemas in the bag, agree field by field with the
     installed message types on sampled messages of every topic."""
@@ -188,10 +191,10 @@ def test_two_independent_readers_decode_every_field(recorded):
                 by_rosbags[(topic, index)] = fields_of(
                     reader.deserialize(data, connection.msgtype))
     assert set(by_rosbags) == set(by_mcap)
-    assert {t for t, _ in by_mcap} == set(bag.TOPIC_TYPES)
+    assert {t for t, _ in by_mcap} == set(names.TOPIC_TYPES)
     for (topic, index), fields in by_mcap.items():
         installed = fields_of(deserialize_message(raw[(topic, index)],
-                                                  bag.message_class(bag.TOPIC_TYPES[topic])))
+                                                  bag.message_class(names.TOPIC_TYPES[topic])))
         assert fields == installed, (topic, index)
         assert by_rosbags[(topic, index)] == installed, (topic, index)
         if "tick" in fields:
@@ -234,13 +237,14 @@ def tool(env, module, *args, timeout=120):  # a bound against a hang: startup ca
                           text=True, timeout=timeout)
 
 
+@pytest.mark.ros
 def test_echo_topics_then_ctrl_c_leaves_a_complete_bag(ros_env, tmp_path):
     """Against a live graph: clnn_ros.topics and clnn_ros.echo (YAML, --field, --raster, Ctrl-C,
     an unknown topic); then Ctrl-C to the whole run leaves a finished bag."""
     process = start_run(ros_env, tmp_path)
     wait_for_line(process.stdout, "trial    3/")
     # The model's topics, and ROS's own: the plumbing is hidden (names with a part "_...").
-    graph = {f"{names.absolute(topic)} [{type_name}]" for topic, type_name in bag.TOPIC_TYPES.items()
+    graph = {f"{names.absolute(topic)} [{type_name}]" for topic, type_name in names.TOPIC_TYPES.items()
              } | {"/parameter_events [rcl_interfaces/msg/ParameterEvent]",
                   "/rosout [rcl_interfaces/msg/Log]"}
     assert listed_topics(ros_env, graph) == graph
@@ -284,6 +288,7 @@ def test_echo_topics_then_ctrl_c_leaves_a_complete_bag(ros_env, tmp_path):
     assert not processes_with(str(tmp_path))
 
 
+@pytest.mark.ros
 def test_killed_recorder_leaves_its_complete_chunks(ros_env, tmp_path):
     process = start_run(ros_env, tmp_path)
     path = tmp_path / "run.mcap"
@@ -316,6 +321,7 @@ def analyze(*args):
                           capture_output=True, text=True, timeout=60)
 
 
+@pytest.mark.ros
 def test_analyze_refuses_bad_bags_with_one_line(recorded, tmp_path):
     good = recorded / "run.mcap"
     truncated = tmp_path / "truncated.mcap"
@@ -353,6 +359,7 @@ def test_sample_bag_analysis(tmp_path):
         (tmp_path / "summary.md").read_text()
 
 
+@pytest.mark.ros
 def test_sigterm_stops_a_recorder_that_recorded_nothing(ros_env, tmp_path):
     """A recorder alone (no graph yet) told to stop with SIGTERM: a clean exit, and no bag,
     since nothing was recorded."""

@@ -24,6 +24,7 @@ from test_faults import error_lines
 
 from conftest import free_domain_id, ros_environment
 
+pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 DOMAIN_ID = free_domain_id()
 
 
@@ -69,9 +70,11 @@ def test_a_read_only_parameter_is_refused_with_a_reason(agent_by_hand):
     result = call(agent_by_hand, SetParameters, "/agent/set_parameters", request).results[0]
     assert not result.successful and "read-only" in result.reason
     values = call(agent_by_hand, GetParameters, "/agent/get_parameters",
-                  GetParameters.Request(names=["sigma", "use_sim_time", "seed"])).values
+                  GetParameters.Request(names=["sigma", "use_sim_time", "seed",
+                                               "segments"])).values
     assert [values[0].integer_value, values[1].bool_value, values[2].integer_value] == \
         [128, True, 3]  # unchanged; the node follows the graph's clock
+    assert values[3].integer_value == 3  # not given: the paper's count for 1 SV, shown as such
 
 
 def test_parameters_describe_their_meaning_and_constraints(agent_by_hand):

@@ -1,5 +1,4 @@
-"""Checkpoints: the state an episode continues from, in one numpy `.npz` file, and the other
-sources of initial weights (a `.npy` array, the optimal weights of Figures 7 and 12).
+"""Checkpoints: the state an episode continues from, in one numpy `.npz` file.
 
 A checkpoint holds everything the rest of an episode depends on: the model parameters, the seed
 (it fixes the initial angle of every trial), the index of the next trial, the agent's whole state
@@ -22,7 +21,6 @@ from pathlib import Path
 
 import numpy as np
 
-from .optimal import optimal_weights
 from .params import ParamError, Params
 from .rln import RLNAgent, SuccessCounter
 
@@ -30,8 +28,6 @@ FORMAT = "clnn_ros.checkpoint"
 FORMAT_VERSION = 1
 # The scalars of the file besides the agent's arrays (stored as "agent_<name>").
 SCALARS = ("seed", "next_trial", "trial_step", "tick", "success_count")
-# init_weights names for the optimal weights, and the state variables they are made for.
-OPTIMAL = {"fig7": 1, "fig12": 2}
 
 
 class CheckpointError(ParamError):
@@ -91,7 +87,7 @@ def load_checkpoint(path: str | os.PathLike) -> Checkpoint:
         raise CheckpointError(f"checkpoint {path}: no such file") from None
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as error:
         raise CheckpointError(f"checkpoint {path}: not a readable .npz file "
-                              f"({_first_line(error)})") from None
+                              f"({first_line(error)})") from None
     if str(entries.get("format", "")) != FORMAT:
         raise CheckpointError(f"checkpoint {path}: not a clnn_ros checkpoint (no format "
                               f"'{FORMAT}')")
@@ -108,7 +104,7 @@ def load_checkpoint(path: str | os.PathLike) -> Checkpoint:
     except KeyError as error:
         raise CheckpointError(f"checkpoint {path}: entry {error} is missing") from None
     except (TypeError, ValueError) as error:  # ParamError included
-        raise CheckpointError(f"checkpoint {path}: {_first_line(error)}") from None
+        raise CheckpointError(f"checkpoint {path}: {first_line(error)}") from None
     if any(scalars[name] < 0 for name in ("seed", "next_trial", "trial_step", "success_count")):
         raise CheckpointError(f"checkpoint {path}: negative counts {scalars}")
     return Checkpoint(params, agent=agent.state(), **scalars)
@@ -120,7 +116,9 @@ def check_resumable(checkpoint: Checkpoint, params: Params, seed: int) -> None:
     if seed != checkpoint.seed:
         raise CheckpointError(f"the checkpoint continues seed {checkpoint.seed}, this run has "
                               f"seed {seed}")
-    saved, wanted = checkpoint.params.to_dict(), params.to_dict()
+    # segments None stands for the paper's count for nsv: the count the network has is compared
+    saved = {**checkpoint.params.to_dict(), "segments": checkpoint.params.n_segments}
+    wanted = {**params.to_dict(), "segments": params.n_segments}
     differ = [k for k in saved if k != "trials" and saved[k] != wanted[k]]
     if differ:
         raise CheckpointError("the checkpoint was saved with " + ", ".join(
@@ -135,41 +133,16 @@ def restore(checkpoint: Checkpoint) -> tuple[RLNAgent, SuccessCounter]:
     """The agent and success counter of a checkpoint, as they were when it was saved."""
     agent = RLNAgent(checkpoint.params, checkpoint.weights, seed=checkpoint.seed)
     agent.load_state(checkpoint.agent)
+    return agent, restore_counter(checkpoint)
+
+
+def restore_counter(checkpoint: Checkpoint) -> SuccessCounter:
+    """The success counter of a checkpoint, as it was when it was saved."""
     counter = SuccessCounter(checkpoint.params)
     counter.count = checkpoint.success_count
-    return agent, counter
+    return counter
 
 
-def load_weights(source: str, params: Params) -> np.ndarray:
-    """Initial weights from "fig7" / "fig12" (the optimal weights at w_max) or a `.npy` file of
-    shape (2, segments, inputs) with values in [0, w_max]; CheckpointError with one line
-    otherwise."""
-    shape = (2, params.n_segments, params.n_inputs)
-    if source in OPTIMAL:
-        weights = optimal_weights(OPTIMAL[source], params.w_max)
-        if weights.shape != shape:
-            raise CheckpointError(f"{source} weights are for nsv={OPTIMAL[source]} with the "
-                                  f"paper's segments and angle edges, shape {weights.shape}; "
-                                  f"this run's network has shape {shape} (nsv={params.nsv})")
-        return weights
-    if not source.endswith(".npy"):
-        raise CheckpointError(f"init_weights must be fig7, fig12, a weights .npy or a checkpoint "
-                              f".npz file, got {source!r}")
-    try:
-        weights = np.load(source, allow_pickle=False)
-    except FileNotFoundError:
-        raise CheckpointError(f"weights {source}: no such file") from None
-    except (OSError, ValueError, EOFError) as error:
-        raise CheckpointError(f"weights {source}: not a readable .npy file "
-                              f"({_first_line(error)})") from None
-    if weights.shape != shape or weights.dtype.kind not in "fiu":
-        raise CheckpointError(f"weights {source}: {weights.dtype} array of shape {weights.shape}, "
-                              f"this run's network needs numbers of shape {shape} "
-                              f"(nsv={params.nsv})")
-    if not np.all((weights >= 0) & (weights <= params.w_max)):
-        raise CheckpointError(f"weights {source}: values must lie in [0, w_max={params.w_max:g}]")
-    return weights.astype(np.float64)
-
-
-def _first_line(error: Exception) -> str:
+def first_line(error: Exception) -> str:
+    """The first line of an error's message (its type's name if it has none)."""
     return (str(error).strip().splitlines() or [type(error).__name__])[0]

@@ -25,8 +25,7 @@ from typing import Callable
 
 import numpy as np
 
-from .checkpoint import (Checkpoint, capture, check_resumable, load_checkpoint, load_weights,
-                         restore)
+from .checkpoint import Checkpoint, capture, check_resumable, restore
 from .encoder import Encoder
 from .params import Params
 from .physics import CONTINUE, CartPole
@@ -94,16 +93,6 @@ def start_episode(seed: int, p: Params, weights: np.ndarray | None = None,
         raise ValueError("weights and resume exclude each other: a checkpoint has its weights")
     check_resumable(resume, p, seed)
     return *restore(resume), resume.next_trial
-
-
-def start_from_setting(seed: int, p: Params,
-                       init_weights: str) -> tuple[RLNAgent, SuccessCounter, int]:
-    """start_episode from the run setting `init_weights`: "" the seed's weights; "fig7", "fig12"
-    or a weights .npy: a new episode with those weights; a checkpoint .npz: resume it.
-    CheckpointError (a ParamError) with one line for a file or name that does not fit."""
-    if init_weights.endswith(".npz"):
-        return start_episode(seed, p, resume=load_checkpoint(init_weights))
-    return start_episode(seed, p, load_weights(init_weights, p) if init_weights else None)
 
 
 def run_episode(seed: int, p: Params, weights: np.ndarray | None = None, learn: bool = True,

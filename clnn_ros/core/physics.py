@@ -38,7 +38,6 @@ from .params import Params
 
 DEG = math.pi / 180.0  # radians per degree
 CONTINUE, FAIL_ANGLE, FAIL_POSITION = 0, 1, 2
-FAILURE_REASONS = ("", "pole_angle", "cart_position")
 
 
 def physics_constants(p: Params) -> tuple:

@@ -16,9 +16,10 @@ from clnn_ros_msgs.msg import Action, Reward, SpikeVector, WeightSnapshot
 from std_srvs.srv import Trigger
 
 from ..core.checkpoint import capture, save_checkpoint
-from ..core.episode import start_from_setting
+from ..core.episode import start_episode
 from ..core.rln import REWARD_KINDS
 from ..files import describe_write_error
+from ..init_weights import episode_start
 from ..names import ACTION, REWARD, SAVE_CHECKPOINT, SPIKES, WEIGHTS
 from .common import GraphNode, TickJoin, node_main
 
@@ -30,8 +31,9 @@ class AgentNode(GraphNode):
         super().__init__("agent", {"action_pub": (Action, ACTION, 2),
                                    "weights_pub": (WeightSnapshot, WEIGHTS, 1)}, **options)
         # the seed's weights, or those of init_weights (a checkpoint: its whole state)
-        self.agent, self.counter, self.next_trial = start_from_setting(
-            self.settings["seed"], self.params, self.settings["init_weights"])
+        start = episode_start(self.settings["init_weights"], self.settings["seed"], self.params)
+        self.agent, self.counter, self.next_trial = start_episode(
+            self.settings["seed"], self.params, start.weights, start.resume)
         self.trial = -1
         self.trial_start_tick = self.last_tick = None
         self.trial_step = 0  # ticks of trial next_trial done: 0 between two trials

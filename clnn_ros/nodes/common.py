@@ -1,6 +1,7 @@
-"""What every node of the graph shares: QoS, content rules, readiness, refusals and main().
+"""What every node of the graph shares: QoS profiles, content rules, readiness, refusals and
+main().
 
-The lockstep protocol and the names are in clnn_ros.names. No message of tick t+1 can exist
+The lockstep protocol and the names are in clnn_ros.names, the QoS descriptions in clnn_ros.qos. No message of tick t+1 can exist
 before every node has finished tick t, so a node only ever receives messages of its current
 tick; anything else is refused with a logged reason (throttled) and the node's state untouched.
 """
@@ -30,8 +31,9 @@ from std_msgs.msg import String
 
 from clnn_ros_msgs.msg import TrialEvent
 
+from .. import qos
 from ..core.params import ParamError
-from ..names import (ACTION, CLOCK, READY, REWARD, SPIKES, STATE, TRIAL_EVENT, WEIGHTS)
+from ..names import ACTION, CLOCK, READY, REWARD, SPIKES, STATE, TRIAL_EVENT, WEIGHTS
 from .parameters import declare_parameters, names_list, read_params_file
 from .validate import (action_problem, clock_problem, event_problem, reward_problem,
                        spikes_problem, state_problem, weights_problem)
@@ -41,23 +43,22 @@ CONTENT_RULES = {CLOCK: clock_problem, TRIAL_EVENT: event_problem, STATE: state_
                  SPIKES: spikes_problem, REWARD: reward_problem, ACTION: action_problem,
                  WEIGHTS: weights_problem}
 
-# In lockstep a publisher is never more than a few messages ahead of any node of the graph (at
-# most END, EPISODE_END and START on trial/event within one tick). A subscriber outside the
-# lockstep (echo, the recorder) may lag: the publisher's history keeps the last 2000 messages
-# for it (about 1 s of the graph); the recorder also holds the graph back (RECORDER_WINDOW).
-LOCKSTEP_QOS = QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE,
-                          history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
+
+def qos_profile(description: qos.Qos) -> QoSProfile:
+    """The rclpy QoSProfile of a plain description (clnn_ros.qos)."""
+    return QoSProfile(depth=description.depth,
+                      reliability=ReliabilityPolicy[description.reliability.upper()],
+                      durability=DurabilityPolicy[description.durability.upper()],
+                      history=HistoryPolicy[description.history.upper()])
+
+
+LOCKSTEP_QOS = qos_profile(qos.LOCKSTEP)
+PROGRESS_QOS = qos_profile(qos.PROGRESS)
+READY_QOS = qos_profile(qos.READY)
 # The recorder's progress (the last tick it holds on every per-tick topic): the trial manager
 # keeps the graph at most RECORDER_WINDOW ticks ahead of it, far less than the publishers'
 # history, so a slow recorder slows the graph down instead of losing messages.
 RECORDER_WINDOW = 500
-PROGRESS_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                          history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
-# A readiness announcement must reach a trial manager that starts later than the node; the
-# depth keeps every node's announcement when several arrive at once.
-READY_QOS = QoSProfile(depth=16, reliability=ReliabilityPolicy.RELIABLE,
-                       history=HistoryPolicy.KEEP_LAST,
-                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 ACK_WAIT_S = 2.0  # a node's last messages reach the recorder before the node exits (or this)
 REFUSAL_LOG_S = 1.0  # at most one refusal line per topic per second (a flood fills no disk)
 # run_all gives each child a pipe on stdin that it never writes to: end of file means run_all

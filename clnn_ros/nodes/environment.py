@@ -13,7 +13,8 @@ from __future__ import annotations
 from clnn_ros_msgs.msg import Action, CartPoleState, TrialEvent
 from rosgraph_msgs.msg import Clock
 
-from ..core.physics import CONTINUE, FAILURE_REASONS, CartPole
+from ..core.physics import CONTINUE, CartPole
+from ..message_fields import FAILURE_REASONS
 from ..names import ACTION, CLOCK, STATE, TRIAL_EVENT
 from .common import GraphNode, node_main
 

@@ -27,8 +27,8 @@ NON_NEGATIVE = (0.0, sys.float_info.max)
 # name: (description, (lowest, highest) or choices)
 DESCRIPTIONS = {
     "nsv": ("state variables encoded: 1 = pole angle, 2 = angle and cart velocity", (1, 2)),
-    "segments": ("dendritic segments per neuron; 0 = the paper's (3 for 1 SV, 9 for 2 SV)",
-                 (0, 64)),
+    "segments": ("dendritic segments per neuron; not given: the paper's, 3 for 1 SV and 9 for "
+                 "2 SV (declared with the count in use)", (1, 64)),
     "sigma": ("success window: a positive reward every sigma successful steps", COUNT),
     "omega": ("punishment window: length of the action path punished on a failure", COUNT),
     "rho_plus": ("maximum reward capture (synapses whose e flag is 1)", NON_NEGATIVE),
@@ -101,12 +101,13 @@ def declare_parameters(node: Node, own: dict[str, tuple] | None = None) -> tuple
         settings[name] = convert_setting(name, given.pop(name))
     for name, (default, _) in (own or {}).items():
         settings[name] = given.pop(name, default)
-    if given.get("segments") == 0:
-        given.pop("segments")  # 0 stands for the paper's default (ROS has no null parameter)
     params = params_from_strings(given)
     descriptions = {name: description for name, (_, description) in (own or {}).items()}
-    for name, value in {**params.to_dict(), **settings}.items():
-        value = 0 if value is None else list(value) if isinstance(value, tuple) else value
+    # Params.segments None is the paper's count for nsv; a ROS parameter has no null value, so
+    # the node shows the count its network has.
+    declared = {**params.to_dict(), "segments": params.n_segments, **settings}
+    for name, value in declared.items():
+        value = list(value) if isinstance(value, tuple) else value
         node.declare_parameter(name, value, descriptor(name, descriptions.get(name)),
                                ignore_override=True)
     return params, settings

@@ -29,24 +29,22 @@ from .. import rosenv  # noqa: F401  (loopback DDS discovery by default, before 
 from mcap.writer import CompressionType, Writer
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from rclpy.task import Future
 from std_msgs.msg import String, UInt64
 
 from clnn_ros_msgs.msg import TrialEvent
 
-from .. import bag
+from .. import bag, qos
 from ..core.params import ParamError, Params
 from ..files import describe_write_error
-from ..names import CLOCK, PER_TICK, READY, RECORDED, RECORDER, TRIAL_EVENT
-from .common import PROGRESS_QOS, READY_QOS, ros_session, spin_until_finished, steady_clock
+from ..names import (CLOCK, PER_TICK, READY, RECORDED, RECORDER, TOPIC_TYPES,
+                     TRIAL_EVENT)
+from .common import (PROGRESS_QOS, READY_QOS, qos_profile, ros_session, spin_until_finished,
+                     steady_clock)
 from .parameters import declare_parameters
 
-# Deep enough that the DDS receive thread never drops a message while Python is busy (the
-# graph's publishers keep 2000): the recorder may lag behind the lockstep graph without loss.
-RECORD_QOS = QoSProfile(depth=100_000, reliability=ReliabilityPolicy.RELIABLE,
-                        history=HistoryPolicy.KEEP_LAST, durability=DurabilityPolicy.VOLATILE)
+RECORD_QOS = qos_profile(qos.RECORD)
 LINGER_S = 0.3      # after EPISODE_END: wait for messages still in flight on other topics
 LINGER_MAX_S = 2.0
 
@@ -79,13 +77,13 @@ class RecorderNode(Node):
             "namespace": self.get_namespace(), "bag_format": "clnn_ros.bag"})
         self.channels = {}     # topic -> channel id
         self.topics = []       # rosbag2 topic metadata
-        self.counts = {topic: 0 for topic in bag.TOPIC_TYPES}
+        self.counts = {topic: 0 for topic in TOPIC_TYPES}
         self.first_ns = self.last_ns = None
         self.last_tick = {}    # per-tick topic -> sim time of its last message
         self.missing = 0       # messages of per-tick topics that never arrived (gaps)
         self.subscriptions_by_topic = {}
         self.tau_ns = round(params.tau * 1e9)
-        for topic, type_name in bag.TOPIC_TYPES.items():
+        for topic, type_name in TOPIC_TYPES.items():
             self.subscriptions_by_topic[topic] = self.create_subscription(
                 bag.message_class(type_name), topic, self._receiver(topic), RECORD_QOS, raw=True)
         self.finished = Future()
@@ -100,7 +98,7 @@ class RecorderNode(Node):
     def _channel(self, topic: str) -> int:
         channel = self.channels.get(topic)
         if channel is None:
-            type_name = bag.TOPIC_TYPES[topic]
+            type_name = TOPIC_TYPES[topic]
             resolved = self.subscriptions_by_topic[topic].topic_name
             schema = self.writer.register_schema(name=type_name, encoding="ros2msg",
                                                  data=bag.schema_text(type_name).encode())
@@ -155,7 +153,7 @@ class RecorderNode(Node):
         if self._ready_publisher is not None:
             if all(s.get_publisher_count() >= 1 for s in self.subscriptions_by_topic.values()):
                 try:
-                    for topic in bag.TOPIC_TYPES:
+                    for topic in TOPIC_TYPES:
                         self._channel(topic)
                 except OSError as error:
                     self.failure = describe_write_error(error, self.path)
@@ -184,7 +182,7 @@ class RecorderNode(Node):
         total = sum(self.counts.values())
         try:
             if not self.failure:
-                for topic in bag.TOPIC_TYPES:
+                for topic in TOPIC_TYPES:
                     self._channel(topic)
                 start = self.first_ns or time.time_ns()
                 self.writer.add_metadata("rosbag2", {

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 from clnn_ros_msgs.msg import CartPoleState, Reward
 
-from ..core.episode import start_from_setting
 from ..core.rln import NONE, ONE_HOT, REWARD_KINDS
+from ..init_weights import episode_start
 from ..names import REWARD, STATE
 from .common import GraphNode, TickJoin, node_main
 
@@ -20,8 +20,8 @@ class RewardNode(GraphNode):
         # reward subscribers: agent, trial manager
         super().__init__("reward", {"reward_pub": (Reward, REWARD, 2)}, **options)
         # a resumed episode (init_weights: a checkpoint) continues a carried success count
-        self.counter = start_from_setting(self.settings["seed"], self.params,
-                                          self.settings["init_weights"])[1]
+        self.counter = episode_start(self.settings["init_weights"], self.settings["seed"],
+                                     self.params).success_counter(self.params)
         self.trial = -1
         self.reward_msg = Reward()  # one message object, refilled each tick
         self.join = TickJoin(self, (STATE,), self.on_tick)

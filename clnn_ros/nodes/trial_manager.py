@@ -38,8 +38,10 @@ from clnn_ros_msgs.msg import Action, CartPoleState, Reward, SpikeVector, TrialE
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String, UInt64
 
-from ..core.episode import seed_setup, start_from_setting
+from ..core.episode import seed_setup
 from ..files import describe_write_error, write_atomically, write_text_atomically
+from ..init_weights import episode_start
+from ..message_fields import REACHED_MAX_STEPS, TRIALS_CSV_HEADER
 from ..names import (ACTION, CLOCK, GRAPH_NODES, NOT_STARTED, PUBLISHED_BY, READY, RECORDED,
                      RECORDER, REWARD,
                      SPIKES, STATE, TRIAL_EVENT, TRIAL_MANAGER, WEIGHTS)
@@ -74,8 +76,8 @@ class TrialManagerNode(GraphNode):
         self.trial_end_tick = None  # the last tick of the last trial that ended
         self.last_trial_tick = None  # set when the last trial is over
         # a resumed episode (init_weights: a checkpoint) starts at the checkpoint's next trial
-        self.trial = start_from_setting(self.settings["seed"], self.params,
-                                        self.settings["init_weights"])[2]
+        self.trial = episode_start(self.settings["init_weights"], self.settings["seed"],
+                                   self.params).first_trial
         self.created_at = time.monotonic()
         self.started_at = None
         self.ready = set()
@@ -250,7 +252,7 @@ class TrialManagerNode(GraphNode):
         if action.force_direction != 0:
             self.advance(tick + 1, starts_trial=False)
             return
-        reason = state.failure_reason or "max_steps"
+        reason = state.failure_reason or REACHED_MAX_STEPS
         self.trial_end_tick = tick
         self.results.append((self.trial, float(self.angles[self.trial]), state.successful_steps,
                              reason))
@@ -314,7 +316,7 @@ class TrialManagerNode(GraphNode):
     def write_trials(self, out: Path) -> None:
         text = io.StringIO()
         writer = csv.writer(text)
-        writer.writerow(["seed", "trial", "initial_angle_deg", "steps", "end_reason"])
+        writer.writerow(TRIALS_CSV_HEADER)
         writer.writerows([self.settings["seed"], *r] for r in self.results)
         write_text_atomically(out / "trials.csv", text.getvalue())
 

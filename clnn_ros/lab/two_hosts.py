@@ -3,8 +3,8 @@ the graph in another ("brain"), joined by a veth pair with addresses of their ow
 is restricted to that link. Runs the same episode across the link, then on one host, checks that
 the results are equal and prints both throughputs (docs/MULTI_HOST.md).
 
-    python -m clnn_ros.two_hosts --seed 1 --trials 8 --max-steps 1500 --out DIR
-    python -m clnn_ros.two_hosts --start external --namespace robot1 ...
+    python -m clnn_ros.lab.two_hosts --seed 1 --trials 8 --max-steps 1500 --out DIR
+    python -m clnn_ros.lab.two_hosts --start external --namespace robot1 ...
 
 --start env-node (default): run_all in B starts the environment in A through `--env-node "ip
 netns exec A ..."`; external: run_all in B runs `--env external`, and the environment node is
@@ -35,11 +35,11 @@ from typing import Iterator
 
 import numpy as np
 
-from .cli import OneLineArgumentParser
-from .core.params import ParamError, params_from_strings
-from .nodes.common import EXIT_WITH_STDIN, catch_signals
-from .nodes.parameters import convert_setting
-from .run_all import namespace_problem
+from ..cli import OneLineArgumentParser
+from ..core.params import ParamError, params_from_strings
+from ..nodes.common import EXIT_WITH_STDIN, catch_signals
+from ..nodes.parameters import convert_setting
+from ..run_all import namespace_problem
 
 # Addresses of the link: private to the two namespaces, so every run may use the same ones.
 ADDRESSES = ("10.231.0.1", "10.231.0.2")
@@ -213,7 +213,7 @@ def compare(one_host: Path, two_hosts: Path) -> list[str]:
 
 
 def parse_args(argv):
-    parser = OneLineArgumentParser(prog="python -m clnn_ros.two_hosts", name="two_hosts",
+    parser = OneLineArgumentParser(prog="python -m clnn_ros.lab.two_hosts", name="two_hosts",
                                    description=__doc__.split("\n\n")[0])
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--trials", type=int, default=8)

@@ -1,0 +1,35 @@
+"""The QoS of the graph's topics, as plain descriptions: no ROS import, so offline tools and
+benchmarks read them without rclpy. A node builds its rclpy QoSProfile from one
+(clnn_ros.nodes.common.qos_profile). The policy names are those of rclpy's enums in lower case,
+as rosbag2 writes them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Qos:
+    depth: int
+    reliability: str = "reliable"  # or "best_effort"
+    durability: str = "volatile"  # or "transient_local"
+    history: str = "keep_last"
+
+
+# In lockstep a publisher is never more than a few messages ahead of any node of the graph (at
+# most END, EPISODE_END and START on trial/event within one tick). A subscriber outside the
+# lockstep (echo, the recorder) may lag: the publisher's history keeps the last 2000 messages
+# for it (about 1 s of the graph); the recorder also holds the graph back
+# (nodes.common.RECORDER_WINDOW).
+LOCKSTEP = Qos(depth=2000)
+# The recorder's progress: only its latest tick matters.
+PROGRESS = Qos(depth=1)
+# A readiness announcement must reach a trial manager that starts later than the node; the
+# depth keeps every node's announcement when several arrive at once.
+READY = Qos(depth=16, durability="transient_local")
+# The recorder's subscriptions: deep enough that the DDS receive thread never drops a message
+# while Python is busy, so the recorder may lag behind the lockstep graph without loss.
+RECORD = Qos(depth=100_000)
+# echo's subscription: it may print slower than the graph runs.
+ECHO = Qos(depth=1000)

@@ -1,0 +1,51 @@
+"""The layers hold: the core imports nothing else of the project, the offline tools load neither
+rclpy nor numba, and every console script names a main() that exists."""
+
+from __future__ import annotations
+
+import ast
+import importlib
+import resource
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+OFFLINE = ("clnn_ros.analyze", "clnn_ros.bag", "clnn_ros.echo", "clnn_ros.topics",
+           "clnn_ros.names", "clnn_ros.qos", "clnn_ros.message_fields")
+
+
+def test_the_core_imports_nothing_outside_it():
+    for path in sorted((ROOT / "clnn_ros" / "core").glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                assert node.level <= 1, f"{path.name}: from {'.' * node.level}{node.module}"
+                assert node.level or not (node.module or "").startswith("clnn_ros"), path.name
+            elif isinstance(node, ast.Import):
+                assert not any(a.name.startswith("clnn_ros") for a in node.names), path.name
+
+
+def test_offline_tools_load_neither_rclpy_nor_numba():
+    check = (f"import sys, {', '.join(OFFLINE)}; "
+             "print(sorted(m for m in ('rclpy', 'numba') if m in sys.modules))")
+    loaded = subprocess.run([sys.executable, "-c", check], capture_output=True, text=True,
+                            check=True).stdout.strip()
+    assert loaded == "[]"
+    # CPU time, not wall time: other test runs share the machine's cores
+    before = cpu_seconds_of_children()
+    subprocess.run([sys.executable, "-m", "clnn_ros.analyze", "--help"], capture_output=True,
+                   check=True)
+    assert cpu_seconds_of_children() - before < 1.0
+
+
+def cpu_seconds_of_children() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def test_console_scripts_name_a_main():
+    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    for command, target in scripts.items():
+        module, function = target.split(":")
+        assert callable(getattr(importlib.import_module(module), function)), command
