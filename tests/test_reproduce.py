@@ -12,10 +12,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from clnn_ros import reproduce
 from clnn_ros.batch import run_batch
 from clnn_ros.core.params import Params
 from clnn_ros.core.physics import FAIL_POSITION
+from clnn_ros.reproduce.__main__ import main
+from clnn_ros.reproduce.calibration import constant_force_trial
+from clnn_ros.reproduce.common import END_REASONS, parse_seeds
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -29,13 +31,13 @@ ROOT = Path(__file__).resolve().parents[1]
     ("0-31", list(range(32))),
 ])
 def test_parse_seeds_good(spec, seeds):
-    assert reproduce.parse_seeds(spec) == seeds
+    assert parse_seeds(spec) == seeds
 
 
 @pytest.mark.parametrize("spec", ["", " ", "a", "3-1", "-1", "1,,2", "1-2-3", "0-3,2", "1.5", "0-"])
 def test_parse_seeds_bad(spec):
     with pytest.raises(ValueError) as info:
-        reproduce.parse_seeds(spec)
+        parse_seeds(spec)
     assert "\n" not in str(info.value)
 
 
@@ -52,7 +54,7 @@ def _read_csv(path: Path) -> tuple[list[str], list[dict]]:
 ])
 def test_learn_writes_what_run_batch_computes(tmp_path, capsys, argv, params):
     seeds = [3, 5]
-    rc = reproduce.main(["learn", *argv, "--seeds", "3,5", "--trials", "8", "--out", str(tmp_path)])
+    rc = main(["learn", *argv, "--seeds", "3,5", "--trials", "8", "--out", str(tmp_path)])
     assert rc == 0
     ref = run_batch(seeds, params)
     tag = f"{params.nsv}sv"
@@ -64,7 +66,7 @@ def test_learn_writes_what_run_batch_computes(tmp_path, capsys, argv, params):
         k, trial = seeds.index(int(row["seed"])), int(row["trial"])
         assert float(row["initial_angle_deg"]) == ref.initial_angles[k, trial]
         assert int(row["steps"]) == ref.steps[k, trial]
-        assert row["end_reason"] == reproduce.END_REASONS[int(ref.end_status[k, trial])]
+        assert row["end_reason"] == END_REASONS[int(ref.end_status[k, trial])]
 
     saved = np.load(tmp_path / f"final_weights_{tag}.npz")
     np.testing.assert_array_equal(saved["final_weights"], ref.final_weights)
@@ -101,9 +103,9 @@ def test_bad_input_is_one_line_exit_2(tmp_path, bad):
 
 def test_calibrate_b_is_32_in_paper_mode(tmp_path, capsys):
     p = Params()
-    assert reproduce.constant_force_trial(p, +p.force) == (32, FAIL_POSITION)
-    assert reproduce.constant_force_trial(p, -p.force) == (32, FAIL_POSITION)
-    assert reproduce.main(["calibrate", "--out", str(tmp_path)]) == 0
+    assert constant_force_trial(p, +p.force) == (32, FAIL_POSITION)
+    assert constant_force_trial(p, -p.force) == (32, FAIL_POSITION)
+    assert main(["calibrate", "--out", str(tmp_path)]) == 0
     _, rows = _read_csv(tmp_path / "calib_constant_force.csv")
     paper = [r for r in rows if (r["physics"], r["integrator"]) == ("paper", "semi_implicit")]
     assert {(r["force"], r["steps"], r["end_reason"]) for r in paper} == {

@@ -1,0 +1,171 @@
+"""Reproduce Smith (2024): the paper's calibration numbers, the learning runs, Figures 7-15 and the
+generated report docs/REPRODUCTION.md.
+
+    python -m clnn_ros.reproduce calibrate [--out DIR]
+    python -m clnn_ros.reproduce learn --nsv 1 --seeds 0-31 --trials 512 --out DIR [--option key=value]
+    python -m clnn_ros.reproduce figures [--out DIR] [--seeds 0-31]
+    python -m clnn_ros.reproduce all [--out docs]
+
+Every run uses the numba batch engine (clnn_ros.batch) except the traces of Figures 10, 11 and 15,
+which replay one trial with the pure core (clnn_ros.core.episode.run_trial, learn=False) on the
+batch engine's final weights. Each experiment's settings stand at the top of its module.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+from ..cli import OneLineArgumentParser
+from ..core.params import ParamError, Params, params_from_strings
+from .calibration import calibrate, print_calibration, write_calibration
+from .common import DEFAULT_SEEDS, LITERAL_EDGE, TRIALS, parse_seeds, stuck
+from .figures import figures_markdown, make_figures
+from .gymnasium_physics import SELECT_SEEDS, gymnasium_markdown, gymnasium_study, write_gymnasium
+from .learning import learn_run, paper_runs, print_seed_means, write_learn_outputs
+from .open_choices import OPTION_SEEDS, open_choices, open_choices_markdown, write_open_choices
+from .physics_modes import physics_markdown, physics_runs, write_physics
+from .report import claims_markdown, data_files_markdown, header_markdown, write_report
+
+OWN_FLAGS = {"nsv": "--nsv", "trials": "--trials", "velocity_edge": "--velocity-edge",
+             "physics": "--physics"}  # Params fields `learn` sets with a flag, not --option
+
+
+def learn_params(args) -> Params:
+    values = {"nsv": str(args.nsv), "trials": str(args.trials)}
+    if args.velocity_edge is not None:
+        values["velocity_edge"] = args.velocity_edge
+    if args.physics is not None:
+        values["physics"] = args.physics
+    for item in args.option:
+        key, sep, value = item.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise ValueError(f"--option expects key=value, got {item!r}")
+        if key in OWN_FLAGS:
+            raise ValueError(f"set {key} with {OWN_FLAGS[key]}, not --option")
+        values[key] = value.strip()
+    return params_from_strings(values)
+
+
+def cmd_calibrate(args) -> None:
+    cal = calibrate()
+    files = write_calibration(cal, Path(args.out))
+    print_calibration(cal)
+    print(f"wrote {len(files)} CSV files to {args.out}")
+
+
+def cmd_learn(args) -> None:
+    seeds = parse_seeds(args.seeds)
+    p = learn_params(args)
+    run = learn_run(f"{p.nsv}sv", f"{p.nsv} SV", seeds, p)
+    files = write_learn_outputs(run, Path(args.out))
+    print_seed_means(run)
+    print("wrote " + ", ".join(str(f) for f in files))
+
+
+def cmd_figures(args) -> None:
+    seeds = parse_seeds(args.seeds)
+    cal = calibrate()
+    figs = make_figures(cal, paper_runs(seeds, cal), Path(args.out))
+    print(f"wrote {len(figs.paths)} figures to {args.out}")
+
+
+def cmd_all(args) -> None:
+    start = time.perf_counter()
+    seeds, option_seeds = parse_seeds(args.seeds), parse_seeds(args.ambiguity_seeds)
+    out = Path(args.out)
+    data, fig_dir = out / "data", out / "figures"
+    cal = calibrate()
+    files = write_calibration(cal, data)
+    print_calibration(cal)
+    runs = paper_runs(seeds, cal)
+    for run in runs.all():
+        files += write_learn_outputs(run, data)
+        print(f"{run.label}: mean {run.seed_means.mean():.1f}, "
+              f"stuck {stuck(run.seed_means)} of {len(seeds)}")
+    physics = physics_runs(seeds, cal, runs)
+    files.append(write_physics(physics, data))
+    options = open_choices(option_seeds, cal)
+    files += write_open_choices(options, data)
+    figs = make_figures(cal, runs, fig_dir)
+    gym = gymnasium_study(seeds, parse_seeds(SELECT_SEEDS))
+    gym_files = write_gymnasium(gym, data)
+    runtime = time.perf_counter() - start
+    report = out / "REPRODUCTION.md"
+    rel = lambda p: os.path.relpath(p, report.parent)  # noqa: E731
+    path = write_report(report, [
+        header_markdown(runtime, seeds, args.seeds, option_seeds, args.ambiguity_seeds,
+                        float(cal.paper.fig7_steps.mean())),
+        claims_markdown(cal, runs),
+        figures_markdown(figs, runs, rel),
+        physics_markdown(cal, physics, len(seeds)),
+        open_choices_markdown(options, cal.best_edge, len(option_seeds)),
+        data_files_markdown(files, report.parent),
+        gymnasium_markdown(gym, runs, physics, gym_files, rel)])
+    print(f"wrote {path}, {len(figs.paths)} figures, {len(files)} data files "
+          f"in {time.perf_counter() - start:.0f} s")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = OneLineArgumentParser(prog="python -m clnn_ros.reproduce",
+                                   description=__doc__.split("\n\n")[0],
+                                   formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    c = sub.add_parser("calibrate", help="the paper's numbers (a)-(d) under every physics mode")
+    c.add_argument("--out", default="out/calibrate", help="folder for the CSV files")
+    c.set_defaults(func=cmd_calibrate)
+
+    ln = sub.add_parser("learn", help="learning episodes with the batch engine, CSV + NPZ out")
+    ln.add_argument("--nsv", type=int, choices=(1, 2), required=True,
+                    help="state variables: 1 (angle) or 2 (angle and cart velocity)")
+    ln.add_argument("--seeds", default=DEFAULT_SEEDS, help="seeds, e.g. 0-31, 0,3,5 or 0-3,7")
+    ln.add_argument("--trials", type=int, default=TRIALS, help="trials per episode")
+    ln.add_argument("--velocity-edge", type=str, default=None,
+                    help=f"velocity edge in m/s (default: Table 1's {LITERAL_EDGE:g})")
+    ln.add_argument("--physics", default=None, help="paper (default) or correct")
+    ln.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                    help="any other Params field, e.g. tie_break=index (repeatable)")
+    ln.add_argument("--out", default="out/learn", help="folder for learn_<n>sv.csv and weights")
+    ln.set_defaults(func=cmd_learn)
+
+    fg = sub.add_parser("figures", help="Figures 7-15 as PNG (runs what they need)")
+    fg.add_argument("--out", default="out/figures", help="folder for the PNG files")
+    fg.add_argument("--seeds", default=DEFAULT_SEEDS, help="seeds for the learning runs")
+    fg.set_defaults(func=cmd_figures)
+
+    al = sub.add_parser("all", help="everything, then writes OUT/REPRODUCTION.md")
+    al.add_argument("--out", default="docs",
+                    help="folder for REPRODUCTION.md, figures/ and data/")
+    al.add_argument("--seeds", default=DEFAULT_SEEDS, help="seeds for the paper's runs")
+    al.add_argument("--ambiguity-seeds", default=OPTION_SEEDS,
+                    help="seeds for the one-option-at-a-time table")
+    al.set_defaults(func=cmd_all)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        args.func(args)
+    except (ParamError, ValueError) as exc:
+        print(f"python -m clnn_ros.reproduce {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:  # e.g. piped into `head`
+        sys.stdout = open(os.devnull, "w")
+        return 0
+    except OSError as exc:
+        print(f"python -m clnn_ros.reproduce {args.command}: error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
