@@ -259,7 +259,7 @@ def test_external_environment_started_separately(ros_env, tmp_path, namespace):
         assert status == 0, f"{stdout.text()}\n{stderr}"
         assert stdout.wait_for("run_all: completed:", timeout=10), stdout.text()
         # the environment ends by itself on EPISODE_END
-        assert environment.wait(timeout=20) == 0, environment.stderr.read()
+        assert environment.wait(timeout=60) == 0, environment.stderr.read()
     finally:
         end(run, environment)
     core = run_episode(seed, Params(trials=trials, max_steps=max_steps))

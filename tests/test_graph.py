@@ -83,7 +83,8 @@ def test_ctrl_c_stops_everything(ros_env, tmp_path, in_private_shm):
     assert not processes_with(marker["CLNN_TEST_RUN"])
 
 
-def wait_for_line(stream, text: str, timeout: float = 60.0) -> str:
+def wait_for_line(stream, text: str, timeout: float = 180.0) -> str:
+    """The first line with `text`; the timeout bounds a hang, it times nothing."""
     found = []
 
     def read():

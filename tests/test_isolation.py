@@ -114,9 +114,21 @@ def concurrent_runs(link, base_env, tmp_path_factory):
     return outs, sent
 
 
-def our_namespaces() -> set[str]:
+def namespaces_of(pid: int) -> set[str]:
+    """The network namespaces that the two_hosts process `pid` made and left (its names:
+    clnn_<pid><4 hex digits>_a/_b); another test run's are not counted."""
     listed = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout
-    return {line.split()[0] for line in listed.splitlines() if line.startswith("clnn_")}
+    name = re.compile(rf"clnn_{pid}[0-9a-f]{{4}}_[ab]$")
+    return {line.split()[0] for line in listed.splitlines() if name.match(line.split()[0])}
+
+
+def two_hosts(*args, env=None, timeout: float) -> subprocess.CompletedProcess:
+    """Run two_hosts; assert that it left no network namespace."""
+    process = subprocess.Popen([sys.executable, "-m", "clnn_ros.lab.two_hosts", *args], env=env,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    stdout, stderr = process.communicate(timeout=timeout)
+    assert not namespaces_of(process.pid), stderr
+    return subprocess.CompletedProcess(process.args, process.returncode, stdout, stderr)
 
 
 def assert_equals_core(out: Path, seed: int):
@@ -186,13 +198,10 @@ def test_environment_on_another_host_equals_one_host(base_env, tmp_path):
     """python -m clnn_ros.lab.two_hosts: the environment node in its own namespace, reached over
     the veth link with SUBNET discovery; both runs equal the core and the link carried every
     tick's state."""
-    before = our_namespaces()
-    run = subprocess.run([sys.executable, "-m", "clnn_ros.lab.two_hosts", "--seed", "1", "--trials",
-                          str(TRIALS), "--max-steps", str(MAX_STEPS), "--out", str(tmp_path)],
-                         env={**base_env, "ROS_DOMAIN_ID": DOMAIN_IDS[0]}, capture_output=True,
-                         text=True, timeout=2 * RUN_TIMEOUT_S)
+    run = two_hosts("--seed", "1", "--trials", str(TRIALS), "--max-steps", str(MAX_STEPS),
+                    "--out", str(tmp_path), env={**base_env, "ROS_DOMAIN_ID": DOMAIN_IDS[0]},
+                    timeout=2 * RUN_TIMEOUT_S)
     assert run.returncode == 0, run.stderr
-    assert our_namespaces() == before
     summary = run.stdout.splitlines()[-1]
     assert summary.startswith("two_hosts: equal results"), summary
     for out in (tmp_path / "one_host", tmp_path / "two_hosts"):
@@ -205,7 +214,6 @@ def test_ctrl_c_across_the_link_removes_everything(base_env, tmp_path):
     """Ctrl-C while the environment node runs in the other namespace: two_hosts exits 130, and
     no process of the run and neither namespace is left."""
     marker = {**base_env, "ROS_DOMAIN_ID": DOMAIN_IDS[1], "CLNN_TEST_RUN": str(tmp_path)}
-    before = our_namespaces()
     stderr_file = tmp_path / "stderr.log"  # a file: no pipe to fill while we read stdout
     with open(stderr_file, "w") as stderr_log:
         process = subprocess.Popen(
@@ -223,7 +231,7 @@ def test_ctrl_c_across_the_link_removes_everything(base_env, tmp_path):
     assert process.returncode == 130, stderr
     assert "two_hosts: interrupted" in stderr and "Traceback" not in stderr
     assert not processes_with(str(tmp_path))
-    assert our_namespaces() == before
+    assert not namespaces_of(process.pid)
 
 
 @pytest.mark.parametrize("args, message", [
@@ -232,10 +240,7 @@ def test_ctrl_c_across_the_link_removes_everything(base_env, tmp_path):
     (["--discovery", "carrier-pigeon"], "argument --discovery: invalid choice"),
 ])
 def test_two_hosts_refuses_bad_input_before_any_namespace(args, message):
-    before = our_namespaces()
-    run = subprocess.run([sys.executable, "-m", "clnn_ros.lab.two_hosts", *args], capture_output=True,
-                         text=True, timeout=30)
+    run = two_hosts(*args, timeout=120)
     assert run.returncode == 2
     assert run.stderr.startswith("two_hosts: error: ") and message in run.stderr
     assert len(run.stderr.splitlines()) == 1
-    assert our_namespaces() == before

@@ -264,8 +264,8 @@ def test_echo_topics_then_ctrl_c_leaves_a_complete_bag(ros_env, tmp_path):
     raster = subprocess.Popen([sys.executable, "-m", "clnn_ros.echo", "/rln/spikes", "--raster"],
                               env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                               text=True)
-    wait_for_line(raster.stdout, "|", timeout=20)
-    line = wait_for_line(raster.stdout, "tick ", timeout=20)
+    wait_for_line(raster.stdout, "|", timeout=120)
+    line = wait_for_line(raster.stdout, "tick ", timeout=120)
     raster.send_signal(signal.SIGINT)
     _, raster_err = raster.communicate(timeout=10)
     assert raster.returncode == 130 and "Traceback" not in raster_err
