@@ -181,7 +181,6 @@ class Supervisor:
         self._sampler.join(timeout=2.0)
         for child in self.children.values():
             child.close()
-            self.shm_files |= child.shm_files
         problems = remove_unused_fast_dds_files(self.shm_files)
         self._tell_janitor("done", last=True)
         self._janitor.wait()

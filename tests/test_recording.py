@@ -261,9 +261,10 @@ def test_echo_topics_then_ctrl_c_leaves_a_complete_bag(ros_env, tmp_path):
     assert "\nspikes: [" in spikes.stdout and "\ninput_labels: ['pole_angle[" in spikes.stdout
     stamp = tool(ros_env, "clnn_ros.echo", "/rln/action", "--once", "--field", "header.stamp")
     assert list(yaml.safe_load(stamp.stdout.split("---")[0])) == ["sec", "nanosec"]
+    # Marked as the run's: if a wait below fails, the test's cleanup stops it too.
     raster = subprocess.Popen([sys.executable, "-m", "clnn_ros.echo", "/rln/spikes", "--raster"],
-                              env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                              text=True)
+                              env={**ros_env, "CLNN_TEST_RUN": str(tmp_path)},
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     wait_for_line(raster.stdout, "|", timeout=120)
     line = wait_for_line(raster.stdout, "tick ", timeout=120)
     raster.send_signal(signal.SIGINT)
