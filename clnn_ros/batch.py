@@ -3,9 +3,9 @@
 It runs the core's own code, compiled: the physics, the encoder and every part of the learning
 rule (inference, tagging, punishment, reward, counter decay, the success counter: the
 `register_jitable` functions of clnn_ros.core.rln). What is its own is only the episode loop
-and one shortcut: the network's decision for each input pattern is cached and recomputed only
-when the weights change (a punishment or a reward), except with `tie_break="random"`, which
-draws on every tie.
+and one shortcut: the network's decision for each input pattern is cached, and made again only
+when the pattern comes back after a change of the weights (a punishment or a reward), except
+with `tie_break="random"`, which draws on every tie.
 
 tests/test_batch.py proves it equal to the reference core (clnn_ros.core) trial by trial and in
 the final weights, bit for bit, for every option value.
@@ -13,12 +13,15 @@ the final weights, bit for bit, for every option value.
 
 from __future__ import annotations
 
+import hashlib
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numba
 import numpy as np
 
+from .core import encoder, physics, random_stream, rln
 from .core.encoder import Encoder, encode_active
 from .core.episode import angle_grid, seed_setup
 from .core.params import Params
@@ -27,16 +30,7 @@ from .core.rln import (NONE, TIE_RANDOM, Rule, infer, outcome, response_space, r
                        tag_action_path, trial_start_count, update)
 
 
-@numba.njit(cache=True, _nrt=False)
-def _fill_decisions(weights, offsets, radix, rule, rng, active, responses, decisions):
-    """Cache the network decision for every input pattern (mixed-radix index over variables)."""
-    n_vars = offsets.shape[0]
-    for pattern in range(decisions.shape[0]):
-        rest = pattern
-        for v in range(n_vars - 1, -1, -1):
-            active[v] = offsets[v] + rest % radix[v]
-            rest //= radix[v]
-        decisions[pattern] = infer(weights, active, rule.tie_break, rng, responses)
+STALE = -1  # a cached decision made before the weights last changed
 
 
 @numba.njit(cache=True)
@@ -45,7 +39,7 @@ def run_episode_kernel(weights, angles, constants, force, components, edges, off
     """One episode in place: `weights` end as the final weights, per-trial results in the outputs."""
     n_segments, n_inputs = weights.shape[1], weights.shape[2]
     n_vars = components.shape[0]
-    radix = np.empty(n_vars, dtype=np.int64)
+    radix = np.empty(n_vars, dtype=np.int64)  # inputs per variable
     for v in range(n_vars):
         radix[v] = (offsets[v + 1] if v + 1 < n_vars else n_inputs) - offsets[v]
     n_patterns = 1
@@ -64,10 +58,11 @@ def run_episode_kernel(weights, angles, constants, force, components, edges, off
 def _run_trials(weights, angles, constants, force, components, edges, offsets, max_steps, rule,
                 learn, rng, steps_out, status_out, radix, decisions, punish_tagged_at,
                 reward_tagged_at, eligible, active, responses):
-    n_vars = components.shape[0]
+    # The decision for an input pattern depends on the weights only (but for random ties, which
+    # draw anew on every tie): it is cached per pattern, and made again when the pattern comes
+    # back after a change of the weights.
     use_cache = rule.tie_break != TIE_RANDOM
-    if use_cache:
-        _fill_decisions(weights, offsets, radix, rule, rng, active, responses, decisions)
+    decisions[:, 0] = STALE
     now = 0  # the clock of the decay counters
     successes = 0
     for trial in range(angles.shape[0]):
@@ -78,13 +73,12 @@ def _run_trials(weights, angles, constants, force, components, edges, offsets, m
         status = CONTINUE
         while t < max_steps:
             encode_active((x, x_dot, theta, theta_dot), components, edges, offsets, active)
-            if use_cache:
-                pattern = 0
-                for v in range(n_vars):
-                    pattern = pattern * radix[v] + active[v] - offsets[v]
-                neuron, s0, s1 = decisions[pattern, 0], decisions[pattern, 1], decisions[pattern, 2]
-            else:
-                neuron, s0, s1 = infer(weights, active, rule.tie_break, rng, responses)
+            pattern = 0  # mixed-radix number of the spiking inputs
+            for v in range(active.shape[0]):
+                pattern = pattern * radix[v] + active[v] - offsets[v]
+            if decisions[pattern, 0] == STALE or not use_cache:
+                decisions[pattern] = infer(weights, active, rule.tie_break, rng, responses)
+            neuron, s0, s1 = decisions[pattern, 0], decisions[pattern, 1], decisions[pattern, 2]
             tag_action_path(punish_tagged_at, reward_tagged_at, eligible, neuron, (s0, s1),
                             active, now, rule)
             x, x_dot, theta, theta_dot, status = cartpole_step(
@@ -93,9 +87,8 @@ def _run_trials(weights, angles, constants, force, components, edges, offsets, m
             if learn:
                 now = update(kind, weights, punish_tagged_at, reward_tagged_at, eligible, active,
                              now, rule)
-                if kind != NONE and use_cache:
-                    _fill_decisions(weights, offsets, radix, rule, rng, active, responses,
-                                    decisions)
+                if kind != NONE:
+                    decisions[:, 0] = STALE
             if status != CONTINUE:
                 break
             t += 1
@@ -109,6 +102,28 @@ def _run_many(weights, angles, constants, force, components, edges, offsets, max
     for k in numba.prange(weights.shape[0]):
         run_episode_kernel(weights[k], angles[k], constants, force, components, edges, offsets,
                            max_steps, rule, learn, rng[k], steps_out[k], status_out[k])
+
+
+def _drop_stale_cache() -> None:
+    """Numba's disk cache checks only the file of each cached function, not the core files whose
+    functions are compiled into it: after a change to one of those, the cached engine would run
+    the old rule. A digest of them beside the cache drops it then."""
+    core_sources = b"".join(Path(m.__file__).read_bytes() for m in (rln, physics, encoder,
+                                                                    random_stream))
+    digest = hashlib.sha256(core_sources).hexdigest()
+    stamp = Path(_run_many._cache._cache_path) / "batch.core_sources.sha256"
+    try:
+        if stamp.exists() and stamp.read_text() == digest:
+            return
+        for dispatcher in (_run_many, run_episode_kernel, _run_trials):
+            dispatcher._cache.flush()
+        stamp.parent.mkdir(parents=True, exist_ok=True)
+        stamp.write_text(digest)
+    except OSError:  # a read-only cache: numba then compiles anew in each process
+        pass
+
+
+_drop_stale_cache()
 
 
 @dataclass

@@ -43,6 +43,16 @@ REWARD_KINDS = ("none", "reward", "punish")
 ONE_HOT = {NONE: (0, 0), REWARD: (1, 0), PUNISH: (0, 1)}  # the paper's R code
 TIE_EXACT, TIE_INDEX, TIE_RANDOM = (TIE_BREAKS.index(t) for t in ("exact", "index", "random"))
 
+# How the rule's functions are compiled into the batch engine. Its tick loop runs without numba's
+# reference counting, which would cost more there than the rule's own work: the functions called
+# on every tick are inlined into it (tick_kernel), the others are compiled without reference
+# counting too (kernel; none of them makes an array).
+kernel = register_jitable(_nrt=False)
+
+
+def tick_kernel(function):
+    return register_jitable(inline="always")(function)
+
 
 class Rule(NamedTuple):
     """The constants and options of the learning rule, in the types the compiled code takes."""
@@ -68,7 +78,7 @@ class Rule(NamedTuple):
 
 # ---- inference (section 2.2) -------------------------------------------------------------------
 
-@register_jitable
+@kernel
 def segment_response(weights, neuron, segment, active):
     """(sum of ceil(w), sum of w) over the synapses of the spiking inputs `active` (indices): the
     small-integer response, and the exact one that can break its ties."""
@@ -81,7 +91,7 @@ def segment_response(weights, neuron, segment, active):
     return ceiled, exact
 
 
-@register_jitable
+@kernel
 def wta(ceiled, exact, count, tie_break, random_state):
     """Winner-take-all among candidates 0..count-1 with responses ceiled[k] (exact[k]): the
     largest ceiled response; a tie is broken by the option tie_break (draws from random_state)."""
@@ -104,13 +114,13 @@ def wta(ceiled, exact, count, tie_break, random_state):
     return best
 
 
-@register_jitable
+@register_jitable  # it makes an array: with reference counting
 def response_space(n_segments):
     """Scratch space for infer: the ceiled and the exact responses of the WTA's candidates."""
     return np.empty((2, max(n_segments, 2)))
 
 
-@register_jitable
+@kernel
 def dendrite_winner(weights, neuron, active, tie_break, random_state, ceiled, exact):
     """The dendrite WTA: the winning segment of one neuron."""
     n_segments = weights.shape[1]
@@ -119,7 +129,7 @@ def dendrite_winner(weights, neuron, active, tie_break, random_state, ceiled, ex
     return wta(ceiled, exact, n_segments, tie_break, random_state)
 
 
-@register_jitable
+@kernel
 def infer(weights, active, tie_break, random_state, responses):
     """(winning neuron, dendrite winner of neuron 0, of neuron 1) for the spiking inputs
     `active`: the dendrite WTA within each neuron, then the network WTA between the two.
@@ -141,14 +151,14 @@ def infer(weights, active, tie_break, random_state, responses):
 NEVER = -(2**62)  # the tick of a counter not set in this trial: its value is 0
 
 
-@register_jitable
+@kernel
 def counter_value(tagged_at, now, window):
     """The value at tick `now` of a decay counter set to `window` at tick `tagged_at` (an array of
     ticks gives an array of values)."""
     return np.maximum(window - (now - tagged_at), 0)
 
 
-@register_jitable
+@kernel
 def restart_counters(punish_tagged_at, reward_tagged_at, eligible):
     """A trial starts with every decay counter and e flag at 0."""
     punish_tagged_at[:] = NEVER
@@ -158,7 +168,7 @@ def restart_counters(punish_tagged_at, reward_tagged_at, eligible):
 
 # ---- tagging (section 2.3) ---------------------------------------------------------------------
 
-@register_jitable
+@tick_kernel
 def tag_segment(punish_tagged_at, reward_tagged_at, eligible, neuron, segment, active, now):
     """c- = omega on the segment's spiking synapses, c+ = sigma on the segment, e flags latched."""
     eligible[neuron, segment, :] = 0
@@ -168,7 +178,7 @@ def tag_segment(punish_tagged_at, reward_tagged_at, eligible, neuron, segment, a
     reward_tagged_at[neuron, segment] = now
 
 
-@register_jitable
+@tick_kernel
 def tag_action_path(punish_tagged_at, reward_tagged_at, eligible, neuron, segments, active, now,
                     rule):
     """Tag the winning segment of the winning neuron (`segments`: each neuron's dendrite winner);
@@ -182,13 +192,13 @@ def tag_action_path(punish_tagged_at, reward_tagged_at, eligible, neuron, segmen
 
 # ---- the update after the step (section 2.3, Figure 6) -----------------------------------------
 
-@register_jitable
+@kernel
 def clip_weight(w, w_max):
     """Weights saturate at 0 and w_max."""
     return min(max(w, 0.0), w_max)
 
 
-@register_jitable
+@kernel
 def punish(weights, punish_tagged_at, now, rule):
     """w -= pi * c- / omega on every synapse with c- > 0."""
     n_neurons, n_segments, n_inputs = weights.shape
@@ -201,7 +211,7 @@ def punish(weights, punish_tagged_at, now, rule):
                         weights[n, s, i] - rule.punish * c / rule.omega, rule.w_max)
 
 
-@register_jitable
+@kernel
 def reward(weights, reward_tagged_at, eligible, last_active, now, rule):
     """On every segment with c+ > 0: w += rho+ c+ / sigma where e = 1, w -= rho- c+ / sigma where
     e = 0. e is the flag latched at tagging, or with e_flag="live" whether the input spiked on
@@ -224,7 +234,7 @@ def reward(weights, reward_tagged_at, eligible, last_active, now, rule):
                                                rule.w_max)
 
 
-@register_jitable
+@tick_kernel
 def update(kind, weights, punish_tagged_at, reward_tagged_at, eligible, last_active, now, rule):
     """Apply a reward kind (NONE, REWARD, PUNISH) at tick `now`, then decay every counter by one:
     returns the next tick."""
@@ -237,13 +247,13 @@ def update(kind, weights, punish_tagged_at, reward_tagged_at, eligible, last_act
 
 # ---- the success counter: the paper's 1-hot reward R (section 2.3) -----------------------------
 
-@register_jitable
+@tick_kernel
 def trial_start_count(count, rule):
     """The success count a trial starts with: 0, or with success_counter="carry" the count so far."""
     return 0 if rule.counter_per_trial else count
 
 
-@register_jitable
+@tick_kernel
 def outcome(count, failed, rule):
     """(reward kind, new success count) for a step's outcome: PUNISH on failure, REWARD on every
     sigma-th success (the count then restarts), NONE otherwise."""
