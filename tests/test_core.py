@@ -112,8 +112,10 @@ def test_reward_update_by_hand():
     np.testing.assert_array_equal(agent.weights, expected)
 
 
-def test_reward_uses_e_flags_latched_at_tagging():
-    p = Params(sigma=2, rho_plus=0.25, rho_minus=0.125, omega=100)
+@pytest.mark.parametrize("e_flag, older_e", [("latched", 5), ("live", 4)])
+def test_reward_e_flags_latched_at_tagging_or_live(e_flag, older_e):
+    """e latched: each segment's own spikes when it was tagged; live: the latest tick's spikes."""
+    p = Params(sigma=2, rho_plus=0.25, rho_minus=0.125, omega=100, e_flag=e_flag)
     weights = np.full((2, 3, 6), 4.5)
     weights[1, 0, 5] = 4.9  # input 5 -> (1, 0)
     weights[1, 1, 4] = 4.9  # input 4 -> (1, 1)
@@ -123,30 +125,12 @@ def test_reward_uses_e_flags_latched_at_tagging():
     agent.learn(NONE)
     agent.act(eye[4])
     agent.learn(REWARD)
+    others = [i for i in range(6) if i != older_e]
     expected = weights.copy()
     expected[1, 1, 4] += 0.25  # head, c+ = 2: +0.25 * 2/2
     expected[1, 1, [0, 1, 2, 3, 5]] -= 0.125
-    expected[1, 0, 5] += 0.125  # one tick older, c+ = 1: its own latched e flag (input 5)
-    expected[1, 0, [0, 1, 2, 3, 4]] -= 0.0625
-    np.testing.assert_array_equal(agent.weights, expected)
-
-
-def test_live_e_flags_are_the_latest_spikes():
-    p = Params(sigma=2, rho_plus=0.25, rho_minus=0.125, omega=100, e_flag="live")
-    weights = np.full((2, 3, 6), 4.5)
-    weights[1, 0, 5] = 4.9  # input 5 -> (1, 0)
-    weights[1, 1, 4] = 4.9  # input 4 -> (1, 1)
-    agent = RLNAgent(p, weights)
-    eye = np.eye(6, dtype=np.uint8)
-    agent.act(eye[5])
-    agent.learn(NONE)
-    agent.act(eye[4])
-    agent.learn(REWARD)
-    expected = weights.copy()
-    expected[1, 1, 4] += 0.25
-    expected[1, 1, [0, 1, 2, 3, 5]] -= 0.125
-    expected[1, 0, 4] += 0.125  # the older segment too is rewarded on input 4, the latest spike
-    expected[1, 0, [0, 1, 2, 3, 5]] -= 0.0625
+    expected[1, 0, older_e] += 0.125  # one tick older, c+ = 1
+    expected[1, 0, others] -= 0.0625
     np.testing.assert_array_equal(agent.weights, expected)
 
 
