@@ -1,8 +1,8 @@
 """Reinforcement-learning neurons (RLNs) and the three-factor learning rules, sections 2.2-2.3.
 
 Two RLNs, neuron 0 drives -F and neuron 1 drives +F. Each has one dendrite of q segments; each
-segment has one synapse per encoder input. The per-synapse state is kept exactly as the paper's
-Figures 5 and 6 describe it, as explicit decay counters.
+segment has one synapse per encoder input. The per-synapse state is that of the paper's Figures
+5 and 6: decay counters (each kept as the tick at which it was set, see below) and e flags.
 
 Inference (every tick, section 2.2):
     segment response = sum over spiking inputs of ceil(w)      (small-integer inference)
@@ -41,7 +41,7 @@ from .random_stream import next_uniform
 NONE, REWARD, PUNISH = 0, 1, 2
 REWARD_KINDS = ("none", "reward", "punish")
 ONE_HOT = {NONE: (0, 0), REWARD: (1, 0), PUNISH: (0, 1)}  # the paper's R code
-TIE_EXACT, TIE_INDEX, TIE_RANDOM = (TIE_BREAKS.index(t) for t in ("exact", "index", "random"))
+TIE_EXACT, TIE_RANDOM = TIE_BREAKS.index("exact"), TIE_BREAKS.index("random")
 
 # How the rule's functions are compiled into the batch engine. Its tick loop runs without numba's
 # reference counting, which would cost more there than the rule's own work: the functions called
@@ -249,7 +249,8 @@ def update(kind, weights, punish_tagged_at, reward_tagged_at, eligible, last_act
 
 @tick_kernel
 def trial_start_count(count, rule):
-    """The success count a trial starts with: 0, or with success_counter="carry" the count so far."""
+    """The success count a trial starts with: 0, or with success_counter="carry" the count
+    so far."""
     return 0 if rule.counter_per_trial else count
 
 
