@@ -1,196 +1,94 @@
 """Batch engine: many episodes (seeds) at once, compiled with numba, one seed per thread.
 
-It runs the same physics and encoder code as the core (their functions are `register_jitable`)
-and re-implements only the RLN bookkeeping, for speed:
-
-* decay counters are kept lazily as the tick at which they were last set: a counter set to omega
-  at tick t0 reads omega - (t - t0) at tick t, or 0 once that is <= 0; this is exactly the
-  reference's "set, then decrement every tick", without touching every synapse every tick;
-* the network's decision for each input pattern is cached and recomputed only when the weights
-  change (a punishment or a reward), except with `tie_break="random"`, which draws on every tie.
+It runs the core's own code, compiled: the physics, the encoder and every part of the learning
+rule (inference, tagging, punishment, reward, counter decay, the success counter: the
+`register_jitable` functions of clnn_ros.core.rln). What is its own is only the episode loop
+and one shortcut: the network's decision for each input pattern is cached, and made again only
+when the pattern comes back after a change of the weights (a punishment or a reward), except
+with `tie_break="random"`, which draws on every tie.
 
 tests/test_batch.py proves it equal to the reference core (clnn_ros.core) trial by trial and in
-the final weights, bit for bit.
+the final weights, bit for bit, for every option value.
 """
 
 from __future__ import annotations
 
-import math
+import hashlib
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numba
 import numpy as np
 
+from .core import encoder, physics, random_stream, rln
 from .core.encoder import Encoder, encode_active
 from .core.episode import angle_grid, seed_setup
-from .core.params import TIE_BREAKS, Params
+from .core.params import Params
 from .core.physics import CONTINUE, cartpole_step, physics_constants
-from .core.random_stream import next_uniform
-
-NEVER = -(2**62)  # the tick of a counter that was never set in this trial
-TIE_EXACT, TIE_INDEX, TIE_RANDOM = (TIE_BREAKS.index(t) for t in ("exact", "index", "random"))
+from .core.rln import (NONE, TIE_RANDOM, Rule, infer, outcome, response_space, restart_counters,
+                       tag_action_path, trial_start_count, update)
 
 
-@numba.njit(cache=True)
-def _segment_response(weights, neuron, segment, active):
-    """(sum of ceil(w), sum of w) over the spiking inputs of one segment."""
-    ceiled = 0.0
-    exact = 0.0
-    for v in range(active.shape[0]):
-        w = weights[neuron, segment, active[v]]
-        ceiled += math.ceil(w)
-        exact += w
-    return ceiled, exact
-
-
-@numba.njit(cache=True)
-def _beats(ceiled, exact, best_ceiled, best_exact, tie_break):
-    """Does a later candidate beat the best so far? Earlier (lower index) wins a full tie."""
-    if ceiled != best_ceiled:
-        return ceiled > best_ceiled
-    return tie_break == TIE_EXACT and exact > best_exact
-
-
-@numba.njit(cache=True)
-def _dendrite_winner(weights, neuron, active, tie_break, rng):
-    n_segments = weights.shape[1]
-    best, (best_ceiled, best_exact) = 0, _segment_response(weights, neuron, 0, active)
-    n_tied = 1
-    for s in range(1, n_segments):
-        ceiled, exact = _segment_response(weights, neuron, s, active)
-        if tie_break == TIE_RANDOM:
-            if ceiled > best_ceiled:
-                best, best_ceiled, n_tied = s, ceiled, 1
-            elif ceiled == best_ceiled:
-                n_tied += 1
-        elif _beats(ceiled, exact, best_ceiled, best_exact, tie_break):
-            best, best_ceiled, best_exact = s, ceiled, exact
-    if tie_break == TIE_RANDOM and n_tied > 1:
-        pick = int(next_uniform(rng) * n_tied)
-        for s in range(n_segments):
-            if _segment_response(weights, neuron, s, active)[0] == best_ceiled:
-                if pick == 0:
-                    return s
-                pick -= 1
-    return best
-
-
-@numba.njit(cache=True)
-def _infer(weights, active, tie_break, rng, out):
-    """Write (winning neuron, dendrite winner of neuron 0, of neuron 1) into `out`."""
-    s0 = _dendrite_winner(weights, 0, active, tie_break, rng)
-    s1 = _dendrite_winner(weights, 1, active, tie_break, rng)
-    c0, e0 = _segment_response(weights, 0, s0, active)
-    c1, e1 = _segment_response(weights, 1, s1, active)
-    if tie_break == TIE_RANDOM and c0 == c1:
-        neuron = int(next_uniform(rng) * 2)
-    else:
-        neuron = 1 if _beats(c1, e1, c0, e0, tie_break) else 0
-    out[0], out[1], out[2] = neuron, s0, s1
-
-
-@numba.njit(cache=True)
-def _fill_decisions(weights, offsets, radix, tie_break, rng, decisions):
-    """Cache the network decision for every input pattern (mixed-radix index over variables)."""
-    n_vars = offsets.shape[0]
-    active = np.empty(n_vars, dtype=np.int64)
-    for pattern in range(decisions.shape[0]):
-        rest = pattern
-        for v in range(n_vars - 1, -1, -1):
-            active[v] = offsets[v] + rest % radix[v]
-            rest //= radix[v]
-        _infer(weights, active, tie_break, rng, decisions[pattern])
+STALE = -1  # a cached decision made before the weights last changed
 
 
 @numba.njit(cache=True)
 def run_episode_kernel(weights, angles, constants, force, components, edges, offsets, max_steps,
-                       sigma, omega, rho_plus, rho_minus, punish, w_max, tie_break, tag_both,
-                       e_latched, counter_per_trial, learn, rng, steps_out, status_out):
+                       rule, learn, rng, steps_out, status_out):
     """One episode in place: `weights` end as the final weights, per-trial results in the outputs."""
     n_segments, n_inputs = weights.shape[1], weights.shape[2]
     n_vars = components.shape[0]
-    radix = np.empty(n_vars, dtype=np.int64)
+    radix = np.empty(n_vars, dtype=np.int64)  # inputs per variable
     for v in range(n_vars):
         radix[v] = (offsets[v + 1] if v + 1 < n_vars else n_inputs) - offsets[v]
     n_patterns = 1
     for v in range(n_vars):
         n_patterns *= radix[v]
-    decisions = np.empty((n_patterns, 3), dtype=np.int64)
-    use_cache = tie_break != TIE_RANDOM
-    if use_cache:
-        _fill_decisions(weights, offsets, radix, tie_break, rng, decisions)
-    punish_tag = np.empty((2, n_segments, n_inputs), dtype=np.int64)
-    reward_tag = np.empty((2, n_segments), dtype=np.int64)
-    eligible = np.zeros((2, n_segments, n_inputs), dtype=np.uint8)
-    state = np.empty(4)
-    active = np.empty(n_vars, dtype=np.int64)
-    decision = np.empty(3, dtype=np.int64)
+    _run_trials(weights, angles, constants, force, components, edges, offsets, max_steps, rule,
+                learn, rng, steps_out, status_out, radix, np.empty((n_patterns, 3), np.int64),
+                np.empty((2, n_segments, n_inputs), np.int64), np.empty((2, n_segments), np.int64),
+                np.zeros((2, n_segments, n_inputs), np.uint8), np.empty(n_vars, np.int64),
+                response_space(n_segments))
+
+
+# No reference counting in the tick loop: it would cost more than the tick's own work. All the
+# arrays it uses are made by run_episode_kernel.
+@numba.njit(cache=True, _nrt=False)
+def _run_trials(weights, angles, constants, force, components, edges, offsets, max_steps, rule,
+                learn, rng, steps_out, status_out, radix, decisions, punish_tagged_at,
+                reward_tagged_at, eligible, active, responses):
+    # The decision for an input pattern depends on the weights only (but for random ties, which
+    # draw anew on every tie): it is cached per pattern, and made again when the pattern comes
+    # back after a change of the weights.
+    use_cache = rule.tie_break != TIE_RANDOM
+    decisions[:, 0] = STALE
+    now = 0  # the clock of the decay counters
     successes = 0
     for trial in range(angles.shape[0]):
-        punish_tag[:] = NEVER
-        reward_tag[:] = NEVER
-        eligible[:] = 0
-        if counter_per_trial:
-            successes = 0
+        restart_counters(punish_tagged_at, reward_tagged_at, eligible)
+        successes = trial_start_count(successes, rule)
         x, x_dot, theta, theta_dot = 0.0, 0.0, angles[trial], 0.0
         t = 0
         status = CONTINUE
         while t < max_steps:
-            state[0], state[1], state[2], state[3] = x, x_dot, theta, theta_dot
-            encode_active(state, components, edges, offsets, active)
-            if use_cache:
-                pattern = 0
-                for v in range(n_vars):
-                    pattern = pattern * radix[v] + active[v] - offsets[v]
-                decision[:] = decisions[pattern]
-            else:
-                _infer(weights, active, tie_break, rng, decision)
-            neuron = decision[0]
-            for n in range(2):
-                if n == neuron or tag_both:
-                    segment = decision[1 + n]
-                    for v in range(n_vars):
-                        punish_tag[n, segment, active[v]] = t
-                    reward_tag[n, segment] = t
-                    eligible[n, segment, :] = 0
-                    for v in range(n_vars):
-                        eligible[n, segment, active[v]] = 1
+            encode_active((x, x_dot, theta, theta_dot), components, edges, offsets, active)
+            pattern = 0  # mixed-radix number of the spiking inputs
+            for v in range(active.shape[0]):
+                pattern = pattern * radix[v] + active[v] - offsets[v]
+            if decisions[pattern, 0] == STALE or not use_cache:
+                decisions[pattern] = infer(weights, active, rule.tie_break, rng, responses)
+            neuron, s0, s1 = decisions[pattern, 0], decisions[pattern, 1], decisions[pattern, 2]
+            tag_action_path(punish_tagged_at, reward_tagged_at, eligible, neuron, (s0, s1),
+                            active, now, rule)
             x, x_dot, theta, theta_dot, status = cartpole_step(
                 x, x_dot, theta, theta_dot, force if neuron == 1 else -force, constants)
-            changed = False
-            if status != CONTINUE:
-                if learn:
-                    for n in range(2):
-                        for s in range(n_segments):
-                            for i in range(n_inputs):
-                                c = omega - (t - punish_tag[n, s, i])
-                                if c > 0:
-                                    weights[n, s, i] = min(max(
-                                        weights[n, s, i] - punish * c / omega, 0.0), w_max)
-                    changed = True
-            else:
-                successes += 1
-                if successes == sigma:
-                    successes = 0
-                    if learn:
-                        for n in range(2):
-                            for s in range(n_segments):
-                                c = sigma - (t - reward_tag[n, s])
-                                if c > 0:
-                                    for i in range(n_inputs):
-                                        if e_latched:
-                                            spiked = eligible[n, s, i] == 1
-                                        else:
-                                            spiked = False
-                                            for v in range(n_vars):
-                                                spiked = spiked or active[v] == i
-                                        rate = rho_plus if spiked else -rho_minus
-                                        weights[n, s, i] = min(max(
-                                            weights[n, s, i] + rate * c / sigma, 0.0), w_max)
-                        changed = True
-            if changed and use_cache:
-                _fill_decisions(weights, offsets, radix, tie_break, rng, decisions)
+            kind, successes = outcome(successes, status != CONTINUE, rule)
+            if learn:
+                now = update(kind, weights, punish_tagged_at, reward_tagged_at, eligible, active,
+                             now, rule)
+                if kind != NONE:
+                    decisions[:, 0] = STALE
             if status != CONTINUE:
                 break
             t += 1
@@ -199,14 +97,33 @@ def run_episode_kernel(weights, angles, constants, force, components, edges, off
 
 
 @numba.njit(parallel=True, cache=True)
-def _run_many(weights, angles, constants, force, components, edges, offsets, max_steps, sigma,
-              omega, rho_plus, rho_minus, punish, w_max, tie_break, tag_both, e_latched,
-              counter_per_trial, learn, rng, steps_out, status_out):
+def _run_many(weights, angles, constants, force, components, edges, offsets, max_steps, rule,
+              learn, rng, steps_out, status_out):
     for k in numba.prange(weights.shape[0]):
         run_episode_kernel(weights[k], angles[k], constants, force, components, edges, offsets,
-                           max_steps, sigma, omega, rho_plus, rho_minus, punish, w_max, tie_break,
-                           tag_both, e_latched, counter_per_trial, learn, rng[k], steps_out[k],
-                           status_out[k])
+                           max_steps, rule, learn, rng[k], steps_out[k], status_out[k])
+
+
+def _drop_stale_cache() -> None:
+    """Numba's disk cache checks only the file of each cached function, not the core files whose
+    functions are compiled into it: after a change to one of those, the cached engine would run
+    the old rule. A digest of them beside the cache drops it then."""
+    core_sources = b"".join(Path(m.__file__).read_bytes() for m in (rln, physics, encoder,
+                                                                    random_stream))
+    digest = hashlib.sha256(core_sources).hexdigest()
+    stamp = Path(_run_many._cache._cache_path) / "batch.core_sources.sha256"
+    try:
+        if stamp.exists() and stamp.read_text() == digest:
+            return
+        for dispatcher in (_run_many, run_episode_kernel, _run_trials):
+            dispatcher._cache.flush()
+        stamp.parent.mkdir(parents=True, exist_ok=True)
+        stamp.write_text(digest)
+    except OSError:  # a read-only cache: numba then compiles anew in each process
+        pass
+
+
+_drop_stale_cache()
 
 
 @dataclass
@@ -235,9 +152,7 @@ def run_batch(seeds, p: Params, weights: np.ndarray | None = None, angles: np.nd
     status = np.zeros(all_angles.shape, dtype=np.int64)
     start = time.perf_counter()
     _run_many(all_weights, all_angles, physics_constants(p), float(p.force), components, edges,
-              offsets, p.max_steps, p.sigma, p.omega, p.rho_plus, p.rho_minus, p.punish,
-              p.w_max, TIE_BREAKS.index(p.tie_break), p.tagging == "both_neurons",
-              p.e_flag == "latched", p.success_counter == "per_trial", learn, rng, steps, status)
+              offsets, p.max_steps, Rule.from_params(p), learn, rng, steps, status)
     wall = time.perf_counter() - start
     return BatchResult(seeds, all_angles, steps, status, all_weights, wall)
 

@@ -3,7 +3,11 @@ pure-Python reference core and of Gymnasium's CartPole-v1 environment alone (no 
 measured in this one run, plus the wall time of the paper's full 1-SV set (32 seeds x 512 trials)
 with the compile time reported separately.
 
-    python scripts/benchmark_core.py [--out docs/benchmark_core.md]
+    python scripts/benchmark_core.py [--out docs/benchmark_core.md] [--against REV]
+
+--against REV also times the batch engine of an earlier commit (its whole clnn_ros package, as
+`git archive` gives it) on the same full sets, in the same run: each engine in fresh processes,
+taking turns, so that both see the same machine load.
 
 An agent-step is one tick: encode, infer, tag, physics step, reward and update. Gymnasium's
 figure is an environment step alone, with a fixed action, as a yardstick for "how fast can a
@@ -41,19 +45,37 @@ def compile_seconds() -> float:
     return float(out.split()[-1])
 
 
-def batch_full_set(nsv: int) -> tuple[float, int]:
-    from clnn_ros.batch import run_batch
-    from clnn_ros.core.params import Params
+def full_set_seconds(package_root: Path, nsv: int) -> tuple[float, int]:
+    """(wall s, ticks) of one full set by the batch engine of the clnn_ros package in
+    package_root, in a fresh process, once its compiled code is loaded."""
+    code = ("import sys, time; from clnn_ros.batch import run_batch;"
+            "from clnn_ros.core.params import Params;"
+            f"p = Params(nsv={nsv}, trials={TRIALS});"
+            "run_batch([0], p.replace(trials=1, max_steps=1));"
+            f"t = time.perf_counter(); r = run_batch(range({SEEDS}), p);"
+            "print(time.perf_counter() - t, r.steps.sum() + r.steps.size)")
+    env = {**os.environ, "PYTHONPATH": str(package_root)}
+    out = subprocess.run([sys.executable, "-c", code], env=env, cwd=package_root, check=True,
+                         text=True, capture_output=True).stdout.split()
+    return float(out[-2]), int(out[-1])  # the failing step is a tick too
 
-    p = Params(nsv=nsv, trials=TRIALS)
-    run_batch([0], p.replace(trials=1, max_steps=1))  # load the compiled code
-    best, steps = float("inf"), 0
+
+def best_full_sets(roots: dict[str, Path], nsv: int) -> dict[str, tuple[float, int]]:
+    """Best of REPEATS (wall s, ticks) of each engine, the engines taking turns."""
+    best = {name: (float("inf"), 0) for name in roots}
     for _ in range(REPEATS):
-        start = time.perf_counter()
-        result = run_batch(range(SEEDS), p)
-        best = min(best, time.perf_counter() - start)
-        steps = int(result.steps.sum() + result.steps.size)  # the failing step is a tick too
-    return best, steps
+        for name, root in roots.items():
+            best[name] = min(best[name], full_set_seconds(root, nsv))
+    return best
+
+
+def checkout(rev: str, into: Path) -> Path:
+    """The clnn_ros package of commit `rev`, unpacked under `into`."""
+    root = Path(__file__).resolve().parents[1]
+    archive = subprocess.run(["git", "archive", rev, "clnn_ros"], cwd=root, check=True,
+                             capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(into)], input=archive, check=True)
+    return into
 
 
 def core_rate() -> float:
@@ -81,14 +103,38 @@ def gymnasium_rate() -> float:
     return GYM_STEPS / (time.perf_counter() - start)
 
 
+def comparison(sets: dict, rev: str) -> list[str]:
+    """The markdown lines that set this engine's full-set times beside those of commit `rev`."""
+    lines = [f"This engine and the batch engine of commit `{rev}`, the same full sets in the same "
+             f"run (fresh processes taking turns, best of {REPEATS} each):",
+             "",
+             f"| set | this engine | {rev} | ratio | same ticks |",
+             "|---|---:|---:|---:|---|"]
+    for nsv, best in sets.items():
+        (wall, ticks), (wall_then, ticks_then) = best["this"], best[rev]
+        lines.append(f"| {nsv} SV | {wall:.2f} s | {wall_then:.2f} s | {wall / wall_then:.2f} | "
+                     f"{'yes' if ticks == ticks_then else f'no: {ticks:,} vs {ticks_then:,}'} |")
+    return [*lines, ""]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, default=Path("docs/benchmark_core.md"))
+    parser.add_argument("--against", metavar="REV",
+                        help="also time the batch engine of this earlier commit")
     args = parser.parse_args()
 
-    compile_s = compile_seconds()
-    wall_1sv, ticks_1sv = batch_full_set(1)
-    wall_2sv, ticks_2sv = batch_full_set(2)
+    load = os.getloadavg()[0]  # others' processes share the cores: say how busy they were
+    with tempfile.TemporaryDirectory() as earlier:
+        roots = {"this": Path(__file__).resolve().parents[1]}
+        if args.against:
+            try:
+                roots[args.against] = checkout(args.against, Path(earlier))
+            except subprocess.CalledProcessError as error:
+                parser.error(f"--against {args.against}: {error.stderr.decode().strip()}")
+        compile_s = compile_seconds()
+        sets = {nsv: best_full_sets(roots, nsv) for nsv in (1, 2)}
+    (wall_1sv, ticks_1sv), (wall_2sv, ticks_2sv) = sets[1]["this"], sets[2]["this"]
     core = core_rate()
     gym = gymnasium_rate()
     batch = ticks_1sv / wall_1sv
@@ -102,8 +148,10 @@ def main() -> None:
     text = "\n".join([
         "# Benchmark: the model without ROS",
         "",
-        f"Generated by `python scripts/benchmark_core.py` on {platform.node()} "
-        f"({os.cpu_count()} cores, Python {platform.python_version()}), all rates measured in one run.",
+        f"Generated by `python scripts/benchmark_core.py"
+        f"{' --against ' + args.against if args.against else ''}` on {platform.node()} "
+        f"({os.cpu_count()} cores, Python {platform.python_version()}, load average {load:.1f} "
+        f"at the start), all rates measured in one run.",
         "",
         "| path | agent-steps/s | vs Gymnasium env.step |",
         "|---|---:|---:|",
@@ -114,6 +162,7 @@ def main() -> None:
         f"* Full 2-SV set, literal velocity edge ({ticks_2sv:,} ticks): {wall_2sv:.2f} s wall.",
         f"* Numba compile time, paid once (then cached on disk): {compile_s:.1f} s.",
         "",
+        *(comparison(sets, args.against) if args.against else []),
     ])
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(text)

@@ -6,22 +6,41 @@ import pytest
 from clnn_ros.batch import evaluate_weights_batch, run_batch
 from clnn_ros.core.episode import evaluate_weights, run_episode
 from clnn_ros.core.optimal import optimal_weights
-from clnn_ros.core.params import Params
+from clnn_ros.core.params import (E_FLAGS, INTEGRATORS, PHYSICS, SUCCESS_COUNTER, TAGGING,
+                                  TIE_BREAKS, Params)
 
 SEEDS = [0, 5, 11]
 
-# (options, whether some trial lasts beyond sigma = 256 steps, so rewards are exercised too)
+# (options, whether some trial lasts beyond sigma steps, so rewards are exercised too). Trials
+# under index ties and correct physics stay short: a small sigma rewards them all the same.
 CASES = {
     "1sv paper": (dict(nsv=1), True),
     "1sv correct": (dict(nsv=1, physics="correct"), True),
     "2sv paper edge 5": (dict(nsv=2), True),
     "2sv paper edge 0.5": (dict(nsv=2, velocity_edge=0.5), True),
-    "2sv correct euler": (dict(nsv=2, physics="correct", integrator="euler", velocity_edge=0.2),
-                          False),
+    "2sv correct euler": (dict(nsv=2, physics="correct", integrator="euler", velocity_edge=0.2,
+                               sigma=16), True),
     "random ties": (dict(nsv=1, tie_break="random"), True),
-    "index ties, both tagged": (dict(nsv=2, tie_break="index", tagging="both_neurons"), False),
+    "random ties 2sv": (dict(nsv=2, velocity_edge=0.5, tie_break="random"), True),
+    "index ties": (dict(nsv=1, tie_break="index", sigma=16), True),
+    "index ties, both tagged": (dict(nsv=2, tie_break="index", tagging="both_neurons", sigma=16),
+                                True),
+    "both tagged": (dict(nsv=1, tagging="both_neurons"), True),
+    "carried counter": (dict(nsv=1, success_counter="carry"), True),
+    "live e 2sv": (dict(nsv=2, velocity_edge=0.5, e_flag="live"), True),
     "live e, carried counter": (dict(nsv=1, e_flag="live", success_counter="carry"), True),
 }
+
+OPTIONS = {"tie_break": TIE_BREAKS, "tagging": TAGGING, "e_flag": E_FLAGS,
+           "success_counter": SUCCESS_COUNTER, "physics": PHYSICS, "integrator": INTEGRATORS,
+           "nsv": (1, 2)}
+
+
+@pytest.mark.parametrize("option", OPTIONS)
+def test_every_option_value_is_a_rewarded_case(option):
+    default = getattr(Params(), option)
+    covered = {options.get(option, default) for options, rewarded in CASES.values() if rewarded}
+    assert covered == set(OPTIONS[option])
 
 
 @pytest.mark.parametrize("case", CASES)
@@ -35,7 +54,7 @@ def test_batch_equals_core(case):
         np.testing.assert_array_equal(batch.end_status[k], core.end_status)
         np.testing.assert_array_equal(batch.initial_angles[k], core.initial_angles)
         np.testing.assert_array_equal(batch.final_weights[k], core.final_weights)  # bit for bit
-    assert (batch.steps.max() > 256) == rewarded
+    assert (batch.steps.max() > p.sigma) == rewarded
 
 
 def test_batch_equals_core_with_default_cap():

@@ -11,6 +11,7 @@ from clnn_ros.core.optimal import optimal_weights
 from clnn_ros.core.params import ParamError, Params, params_from_strings
 from clnn_ros.core.physics import (CONTINUE, FAIL_POSITION, CartPole, cartpole_step,
                                    physics_constants)
+from clnn_ros.core.random_stream import next_uniform
 from clnn_ros.core.rln import NONE, PUNISH, REWARD, RLNAgent, SuccessCounter
 
 
@@ -54,6 +55,16 @@ def test_wta_tie_is_broken_by_fractional_weights():
     assert agent.infer(spikes) == (1, (2, 1))  # all ceil to 5: only the fractions decide
     agent_by_index = RLNAgent(p.replace(tie_break="index"), weights)
     assert agent_by_index.infer(spikes) == (0, (0, 0))
+
+
+def test_random_ties_draw_dendrite_0_then_1_then_the_network():
+    agent = RLNAgent(Params(tie_break="random"), np.full((2, 3, 6), 4.5), seed=7)
+    stream = np.array([7], dtype=np.uint64)
+    with np.errstate(over="ignore"):
+        expected = [int(next_uniform(stream) * n) for n in (3, 3, 2)]  # all tied at every level
+    neuron, segments = agent.infer(np.eye(6, dtype=np.uint8)[0])
+    assert (*segments, neuron) == tuple(expected)
+    np.testing.assert_array_equal(agent.random_state, stream)
 
 
 def test_ceiled_response_beats_fractions():
@@ -101,8 +112,10 @@ def test_reward_update_by_hand():
     np.testing.assert_array_equal(agent.weights, expected)
 
 
-def test_reward_uses_e_flags_latched_at_tagging():
-    p = Params(sigma=2, rho_plus=0.25, rho_minus=0.125, omega=100)
+@pytest.mark.parametrize("e_flag, older_e", [("latched", 5), ("live", 4)])
+def test_reward_e_flags_latched_at_tagging_or_live(e_flag, older_e):
+    """e latched: each segment's own spikes when it was tagged; live: the latest tick's spikes."""
+    p = Params(sigma=2, rho_plus=0.25, rho_minus=0.125, omega=100, e_flag=e_flag)
     weights = np.full((2, 3, 6), 4.5)
     weights[1, 0, 5] = 4.9  # input 5 -> (1, 0)
     weights[1, 1, 4] = 4.9  # input 4 -> (1, 1)
@@ -112,12 +125,36 @@ def test_reward_uses_e_flags_latched_at_tagging():
     agent.learn(NONE)
     agent.act(eye[4])
     agent.learn(REWARD)
+    others = [i for i in range(6) if i != older_e]
     expected = weights.copy()
     expected[1, 1, 4] += 0.25  # head, c+ = 2: +0.25 * 2/2
     expected[1, 1, [0, 1, 2, 3, 5]] -= 0.125
-    expected[1, 0, 5] += 0.125  # one tick older, c+ = 1: its own latched e flag (input 5)
-    expected[1, 0, [0, 1, 2, 3, 4]] -= 0.0625
+    expected[1, 0, older_e] += 0.125  # one tick older, c+ = 1
+    expected[1, 0, others] -= 0.0625
     np.testing.assert_array_equal(agent.weights, expected)
+
+
+@pytest.mark.parametrize("tagging, tagged", [("winner", [[0, 0, 0], [0, 0, 5]]),
+                                             ("both_neurons", [[5, 0, 0], [0, 0, 5]])])
+def test_tagging_marks_the_action_path_or_both_neurons(tagging, tagged):
+    p = Params(sigma=5, tagging=tagging)
+    weights = np.full((2, 3, 6), 4.5)
+    weights[1, 2, 3] = 4.9  # neuron 1 wins through segment 2; neuron 0's winner is segment 0
+    agent = RLNAgent(p, weights)
+    assert agent.act(np.eye(6, dtype=np.uint8)[3]) == (1, 2)
+    np.testing.assert_array_equal(agent.reward_counter, tagged)
+    np.testing.assert_array_equal(agent.punish_counter[:, :, 3], np.array(tagged) * p.omega // 5)
+
+
+@pytest.mark.parametrize("success_counter, second_trial_kinds", [
+    ("per_trial", [NONE, NONE, REWARD]), ("carry", [REWARD, NONE, NONE])])
+def test_success_counter_per_trial_or_carried(success_counter, second_trial_kinds):
+    counter = SuccessCounter(Params(sigma=3, success_counter=success_counter))
+    counter.begin_trial()
+    assert [counter.outcome(failed=False) for _ in range(2)] == [NONE, NONE]
+    assert counter.outcome(failed=True) == PUNISH
+    counter.begin_trial()
+    assert [counter.outcome(failed=False) for _ in range(3)] == second_trial_kinds  # 2 carried
 
 
 def test_weights_saturate_at_zero_and_wmax():

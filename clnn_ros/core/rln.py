@@ -1,37 +1,269 @@
 """Reinforcement-learning neurons (RLNs) and the three-factor learning rules, sections 2.2-2.3.
 
 Two RLNs, neuron 0 drives -F and neuron 1 drives +F. Each has one dendrite of q segments; each
-segment has one synapse per encoder input. This is the reference implementation: it keeps the
-per-synapse state exactly as the paper's Figures 5 and 6 describe it, as explicit decay counters.
+segment has one synapse per encoder input. The per-synapse state is that of the paper's Figures
+5 and 6: decay counters (each kept as the tick at which it was set, see below) and e flags.
 
-Inference (every tick):
+Inference (every tick, section 2.2):
     segment response = sum over spiking inputs of ceil(w)      (small-integer inference)
     dendrite WTA picks each neuron's best segment, network WTA picks the neuron (the action).
     Ties (all initial weights ceil to 5) are broken by the exact un-ceiled sums, then the lowest
     index (`tie_break="exact"`); "index" skips the exact sums, "random" picks among the tied.
 
-Tagging (the action path): the winning segment of the winning neuron. Its spiking synapses get
-the punishment decay counter c- = omega; the segment gets the reward counter c+ = sigma and each
-of its synapses an e flag latched now (1 if its input spiked).
+Tagging (the action path, section 2.3): the winning segment of the winning neuron. Its spiking
+synapses get the punishment decay counter c- = omega; the segment gets the reward counter
+c+ = sigma and each of its synapses an e flag latched now (1 if its input spiked).
 
-Update, after the environment step:
+Update, after the environment step (section 2.3, Figure 6):
     punishment (failure):   w -= pi * c- / omega            for every synapse with c- > 0
     reward (every sigma-th success):
                             w += rho+ * c+ / sigma  if e = 1,  w -= rho- * c+ / sigma  if e = 0,
                             for every synapse of every segment with c+ > 0
     then every counter decays by one; weights are clipped to [0, w_max].
+
+The rule is written once, as the functions below (`register_jitable`: plain Python when called
+from Python, compiled into the numba batch engine, clnn_ros.batch, which calls the same
+functions). Every option of the rule (tie_break, tagging, e_flag, success_counter) is decided
+here and nowhere else. The classes at the end hold the state and call them, tick by tick.
 """
 
 from __future__ import annotations
 
-import numpy as np
+import math
+from typing import NamedTuple
 
-from .params import Params
+import numpy as np
+from numba.extending import register_jitable
+
+from .params import TIE_BREAKS, Params
 from .random_stream import next_uniform
 
 NONE, REWARD, PUNISH = 0, 1, 2
 REWARD_KINDS = ("none", "reward", "punish")
 ONE_HOT = {NONE: (0, 0), REWARD: (1, 0), PUNISH: (0, 1)}  # the paper's R code
+TIE_EXACT, TIE_RANDOM = TIE_BREAKS.index("exact"), TIE_BREAKS.index("random")
+
+# How the rule's functions are compiled into the batch engine. Its tick loop runs without numba's
+# reference counting, which would cost more there than the rule's own work: the functions called
+# on every tick are inlined into it (tick_kernel), the others are compiled without reference
+# counting too (kernel; none of them makes an array).
+kernel = register_jitable(_nrt=False)
+
+
+def tick_kernel(function):
+    return register_jitable(inline="always")(function)
+
+
+class Rule(NamedTuple):
+    """The constants and options of the learning rule, in the types the compiled code takes."""
+
+    sigma: int
+    omega: int
+    rho_plus: float
+    rho_minus: float
+    punish: float
+    w_max: float
+    tie_break: int  # an index into TIE_BREAKS
+    tag_both: bool  # tagging="both_neurons"
+    e_latched: bool  # e_flag="latched"
+    counter_per_trial: bool  # success_counter="per_trial"
+
+    @classmethod
+    def from_params(cls, p: Params) -> "Rule":
+        return cls(int(p.sigma), int(p.omega), float(p.rho_plus), float(p.rho_minus),
+                   float(p.punish), float(p.w_max), TIE_BREAKS.index(p.tie_break),
+                   p.tagging == "both_neurons", p.e_flag == "latched",
+                   p.success_counter == "per_trial")
+
+
+# ---- inference (section 2.2) -------------------------------------------------------------------
+
+@kernel
+def segment_response(weights, neuron, segment, active):
+    """(sum of ceil(w), sum of w) over the synapses of the spiking inputs `active` (indices): the
+    small-integer response, and the exact one that can break its ties."""
+    ceiled = 0.0
+    exact = 0.0
+    for i in active:
+        w = weights[neuron, segment, i]
+        ceiled += math.ceil(w)
+        exact += w
+    return ceiled, exact
+
+
+@kernel
+def wta(ceiled, exact, count, tie_break, random_state):
+    """Winner-take-all among candidates 0..count-1 with responses ceiled[k] (exact[k]): the
+    largest ceiled response; a tie is broken by the option tie_break (draws from random_state)."""
+    best, tied = 0, 1
+    for k in range(1, count):
+        if ceiled[k] > ceiled[best]:
+            best, tied = k, 1
+        elif ceiled[k] == ceiled[best]:
+            tied += 1
+            if tie_break == TIE_EXACT and exact[k] > exact[best]:  # strict: lowest index wins
+                best = k
+    if tied == 1 or tie_break != TIE_RANDOM:
+        return best
+    pick = int(next_uniform(random_state) * tied)  # the pick-th of the tied, in index order
+    for k in range(count):
+        if ceiled[k] == ceiled[best]:
+            if pick == 0:
+                return k
+            pick -= 1
+    return best
+
+
+@register_jitable  # it makes an array: with reference counting
+def response_space(n_segments):
+    """Scratch space for infer: the ceiled and the exact responses of the WTA's candidates."""
+    return np.empty((2, max(n_segments, 2)))
+
+
+@kernel
+def dendrite_winner(weights, neuron, active, tie_break, random_state, ceiled, exact):
+    """The dendrite WTA: the winning segment of one neuron."""
+    n_segments = weights.shape[1]
+    for s in range(n_segments):
+        ceiled[s], exact[s] = segment_response(weights, neuron, s, active)
+    return wta(ceiled, exact, n_segments, tie_break, random_state)
+
+
+@kernel
+def infer(weights, active, tie_break, random_state, responses):
+    """(winning neuron, dendrite winner of neuron 0, of neuron 1) for the spiking inputs
+    `active`: the dendrite WTA within each neuron, then the network WTA between the two.
+    `responses`: scratch space from response_space()."""
+    ceiled, exact = responses[0], responses[1]
+    s0 = dendrite_winner(weights, 0, active, tie_break, random_state, ceiled, exact)
+    s1 = dendrite_winner(weights, 1, active, tie_break, random_state, ceiled, exact)
+    ceiled[0], exact[0] = segment_response(weights, 0, s0, active)
+    ceiled[1], exact[1] = segment_response(weights, 1, s1, active)
+    return wta(ceiled, exact, 2, tie_break, random_state), s0, s1
+
+
+# ---- decay counters (Figures 5 and 6) ---------------------------------------------------------
+# A counter is set to its window (omega or sigma) at tagging and decays by one every tick, down
+# to 0. It is kept as the tick at which it was set: its value at tick `now` is
+# max(window - (now - tagged_at), 0). That is the same number, and "every counter decays by one"
+# is the clock advancing by one tick instead of a pass over every synapse on every tick.
+
+NEVER = -(2**62)  # the tick of a counter not set in this trial: its value is 0
+
+
+@kernel
+def counter_value(tagged_at, now, window):
+    """The value at tick `now` of a decay counter set to `window` at tick `tagged_at` (an array of
+    ticks gives an array of values)."""
+    return np.maximum(window - (now - tagged_at), 0)
+
+
+@kernel
+def restart_counters(punish_tagged_at, reward_tagged_at, eligible):
+    """A trial starts with every decay counter and e flag at 0."""
+    punish_tagged_at[:] = NEVER
+    reward_tagged_at[:] = NEVER
+    eligible[:] = 0
+
+
+# ---- tagging (section 2.3) ---------------------------------------------------------------------
+
+@tick_kernel
+def tag_segment(punish_tagged_at, reward_tagged_at, eligible, neuron, segment, active, now):
+    """c- = omega on the segment's spiking synapses, c+ = sigma on the segment, e flags latched."""
+    eligible[neuron, segment, :] = 0
+    for i in active:
+        punish_tagged_at[neuron, segment, i] = now
+        eligible[neuron, segment, i] = 1
+    reward_tagged_at[neuron, segment] = now
+
+
+@tick_kernel
+def tag_action_path(punish_tagged_at, reward_tagged_at, eligible, neuron, segments, active, now,
+                    rule):
+    """Tag the winning segment of the winning neuron (`segments`: each neuron's dendrite winner);
+    with tagging="both_neurons" also the other neuron's."""
+    tag_segment(punish_tagged_at, reward_tagged_at, eligible, neuron, segments[neuron], active,
+                now)
+    if rule.tag_both:
+        tag_segment(punish_tagged_at, reward_tagged_at, eligible, 1 - neuron,
+                    segments[1 - neuron], active, now)
+
+
+# ---- the update after the step (section 2.3, Figure 6) -----------------------------------------
+
+@kernel
+def clip_weight(w, w_max):
+    """Weights saturate at 0 and w_max."""
+    return min(max(w, 0.0), w_max)
+
+
+@kernel
+def punish(weights, punish_tagged_at, now, rule):
+    """w -= pi * c- / omega on every synapse with c- > 0."""
+    n_neurons, n_segments, n_inputs = weights.shape
+    for n in range(n_neurons):
+        for s in range(n_segments):
+            for i in range(n_inputs):
+                c = counter_value(punish_tagged_at[n, s, i], now, rule.omega)
+                if c > 0:
+                    weights[n, s, i] = clip_weight(
+                        weights[n, s, i] - rule.punish * c / rule.omega, rule.w_max)
+
+
+@kernel
+def reward(weights, reward_tagged_at, eligible, last_active, now, rule):
+    """On every segment with c+ > 0: w += rho+ c+ / sigma where e = 1, w -= rho- c+ / sigma where
+    e = 0. e is the flag latched at tagging, or with e_flag="live" whether the input spiked on
+    the latest tick (`last_active`)."""
+    n_neurons, n_segments, n_inputs = weights.shape
+    for n in range(n_neurons):
+        for s in range(n_segments):
+            c = counter_value(reward_tagged_at[n, s], now, rule.sigma)
+            if c <= 0:
+                continue
+            for i in range(n_inputs):
+                if rule.e_latched:
+                    e = eligible[n, s, i] == 1
+                else:
+                    e = False
+                    for spiking in last_active:
+                        e = e or spiking == i
+                rate = rule.rho_plus if e else -rule.rho_minus
+                weights[n, s, i] = clip_weight(weights[n, s, i] + rate * c / rule.sigma,
+                                               rule.w_max)
+
+
+@tick_kernel
+def update(kind, weights, punish_tagged_at, reward_tagged_at, eligible, last_active, now, rule):
+    """Apply a reward kind (NONE, REWARD, PUNISH) at tick `now`, then decay every counter by one:
+    returns the next tick."""
+    if kind == PUNISH:
+        punish(weights, punish_tagged_at, now, rule)
+    elif kind == REWARD:
+        reward(weights, reward_tagged_at, eligible, last_active, now, rule)
+    return now + 1
+
+
+# ---- the success counter: the paper's 1-hot reward R (section 2.3) -----------------------------
+
+@tick_kernel
+def trial_start_count(count, rule):
+    """The success count a trial starts with: 0, or with success_counter="carry" the count
+    so far."""
+    return 0 if rule.counter_per_trial else count
+
+
+@tick_kernel
+def outcome(count, failed, rule):
+    """(reward kind, new success count) for a step's outcome: PUNISH on failure, REWARD on every
+    sigma-th success (the count then restarts), NONE otherwise."""
+    if failed:
+        return PUNISH, count
+    count += 1
+    if count == rule.sigma:
+        return REWARD, 0
+    return NONE, count
 
 
 class SuccessCounter:
@@ -39,23 +271,16 @@ class SuccessCounter:
     failure (the paper's 1-hot reward R)."""
 
     def __init__(self, params: Params):
-        self.sigma = params.sigma
-        self.per_trial = params.success_counter == "per_trial"
+        self.rule = Rule.from_params(params)
         self.count = 0
 
     def begin_trial(self) -> None:
-        if self.per_trial:
-            self.count = 0
+        self.count = trial_start_count(self.count, self.rule)
 
     def outcome(self, failed: bool) -> int:
         """The reward kind for a step's outcome: PUNISH, REWARD or NONE."""
-        if failed:
-            return PUNISH
-        self.count += 1
-        if self.count == self.sigma:
-            self.count = 0
-            return REWARD
-        return NONE
+        kind, self.count = outcome(self.count, failed, self.rule)
+        return kind
 
 
 class RLNAgent:
@@ -69,14 +294,39 @@ class RLNAgent:
         if not np.all((weights >= 0) & (weights <= params.w_max)):
             raise ValueError(f"weights must lie in [0, w_max={params.w_max:g}]")
         self.p = params
+        self.rule = Rule.from_params(params)
         self.weights = weights.copy()
-        self.punish_counter = np.zeros(shape, dtype=np.int64)  # c- per synapse
-        self.reward_counter = np.zeros(shape[:2], dtype=np.int64)  # c+ per segment
+        self.tick = 0  # the clock of the decay counters
+        self.punish_tagged_at = np.full(shape, NEVER, dtype=np.int64)  # c- per synapse
+        self.reward_tagged_at = np.full(shape[:2], NEVER, dtype=np.int64)  # c+ per segment
         self.eligible = np.zeros(shape, dtype=np.uint8)  # e flag per synapse
         self.last_spikes = np.zeros(shape[2], dtype=np.uint8)
         self.random_state = np.array([seed], dtype=np.uint64)  # only used by tie_break="random"
 
-    # Everything that changes while the agent runs (its state), by attribute name.
+    @property
+    def punish_counter(self) -> np.ndarray:
+        """c- per synapse, (2, q, n_inputs)."""
+        return counter_value(self.punish_tagged_at, self.tick, self.rule.omega)
+
+    @punish_counter.setter
+    def punish_counter(self, values: np.ndarray) -> None:
+        self.punish_tagged_at = self._tagged_at(values, self.rule.omega)
+
+    @property
+    def reward_counter(self) -> np.ndarray:
+        """c+ per segment, (2, q)."""
+        return counter_value(self.reward_tagged_at, self.tick, self.rule.sigma)
+
+    @reward_counter.setter
+    def reward_counter(self, values: np.ndarray) -> None:
+        self.reward_tagged_at = self._tagged_at(values, self.rule.sigma)
+
+    def _tagged_at(self, values: np.ndarray, window: int) -> np.ndarray:
+        """The ticks at which counters of these values were set (counter_value inverted)."""
+        return np.where(values > 0, self.tick - (window - values), NEVER).astype(np.int64)
+
+    # Everything that changes while the agent runs (its state), by attribute name; the counters
+    # as their values, as the paper has them.
     STATE = ("weights", "punish_counter", "reward_counter", "eligible", "last_spikes",
              "random_state")
 
@@ -98,26 +348,14 @@ class RLNAgent:
 
     def begin_trial(self) -> None:
         """Counters and e flags restart with each trial; the weights carry over."""
-        self.punish_counter[:] = 0
-        self.reward_counter[:] = 0
-        self.eligible[:] = 0
+        restart_counters(self.punish_tagged_at, self.reward_tagged_at, self.eligible)
 
     def infer(self, spikes: np.ndarray) -> tuple[int, tuple[int, int]]:
         """(winning neuron, the dendrite winner of each neuron) for a spike vector."""
-        ceiled = np.ceil(self.weights) @ spikes  # (2, q) integer-valued responses
-        exact = self.weights @ spikes
-        segments = (self._winner(ceiled[0], exact[0]), self._winner(ceiled[1], exact[1]))
-        neuron = self._winner(ceiled[[0, 1], segments], exact[[0, 1], segments])
-        return neuron, segments
-
-    def _winner(self, ceiled: np.ndarray, exact: np.ndarray) -> int:
-        tied = np.flatnonzero(ceiled == ceiled.max())
-        if len(tied) == 1 or self.p.tie_break == "index":
-            return int(tied[0])
-        if self.p.tie_break == "random":
-            with np.errstate(over="ignore"):  # the stream wraps around by design
-                return int(tied[int(next_uniform(self.random_state) * len(tied))])
-        return int(tied[np.argmax(exact[tied])])  # argmax keeps the lowest index among equals
+        with np.errstate(over="ignore"):  # tie_break="random": the stream wraps around by design
+            neuron, s0, s1 = infer(self.weights, np.flatnonzero(spikes), self.rule.tie_break,
+                                   self.random_state, response_space(self.p.n_segments))
+        return neuron, (s0, s1)
 
     def act(self, spikes: np.ndarray) -> tuple[int, int]:
         """Infer and tag the action path; returns (action = winning neuron, 0 = -F and 1 = +F,
@@ -125,29 +363,11 @@ class RLNAgent:
         spikes = np.asarray(spikes, dtype=np.uint8)
         neuron, segments = self.infer(spikes)
         self.last_spikes = spikes
-        self._tag(neuron, segments[neuron], spikes)
-        if self.p.tagging == "both_neurons":
-            self._tag(1 - neuron, segments[1 - neuron], spikes)
+        tag_action_path(self.punish_tagged_at, self.reward_tagged_at, self.eligible, neuron,
+                        segments, np.flatnonzero(spikes), self.tick, self.rule)
         return neuron, segments[neuron]
-
-    def _tag(self, neuron: int, segment: int, spikes: np.ndarray) -> None:
-        self.punish_counter[neuron, segment, spikes == 1] = self.p.omega
-        self.reward_counter[neuron, segment] = self.p.sigma
-        self.eligible[neuron, segment] = spikes
 
     def learn(self, kind: int) -> None:
         """Apply a reward kind (NONE, REWARD, PUNISH), then decay every counter by one."""
-        p = self.p
-        if kind == PUNISH:
-            tagged = self.punish_counter > 0
-            self.weights[tagged] -= p.punish * self.punish_counter[tagged] / p.omega
-        elif kind == REWARD:
-            tagged = self.reward_counter > 0  # segments on the path within sigma steps
-            eligible = (self.eligible if p.e_flag == "latched"
-                        else np.broadcast_to(self.last_spikes, self.eligible.shape))
-            rate = np.where(eligible[tagged] == 1, p.rho_plus, -p.rho_minus)
-            self.weights[tagged] += rate * self.reward_counter[tagged][:, None] / p.sigma
-        if kind != NONE:
-            np.clip(self.weights, 0.0, p.w_max, out=self.weights)
-        np.maximum(self.punish_counter - 1, 0, out=self.punish_counter)
-        np.maximum(self.reward_counter - 1, 0, out=self.reward_counter)
+        self.tick = update(kind, self.weights, self.punish_tagged_at, self.reward_tagged_at,
+                           self.eligible, np.flatnonzero(self.last_spikes), self.tick, self.rule)
