@@ -402,6 +402,7 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
         environment: str | None, env_command: list[str] | None, interrupted: list[int]) -> int:
     began = time.time()
     with tempfile.TemporaryDirectory(prefix="clnn_ros_") as tmp:
+        supervisor.remove_if_killed(Path(tmp))
         out = args.out or Path(tmp) / "out"
         values["out_dir"] = str(out.resolve())
         bag_path = None

@@ -20,6 +20,7 @@ import sys
 import threading
 import time
 from collections import deque
+from pathlib import Path
 
 from .rosenv import (own_fast_dds_files, remove_files_of_dead_process,
                      remove_unused_fast_dds_files)
@@ -118,6 +119,10 @@ class Supervisor:
         self.children[name] = child = Child(name, command, env)
         self._tell_janitor(f"pid {child.process.pid}")
         return child
+
+    def remove_if_killed(self, directory: Path) -> None:
+        """Have the janitor remove `directory` (run_all's work directory) if run_all is killed."""
+        self._tell_janitor(f"dir {directory}")
 
     def _tell_janitor(self, *lines: str, last: bool = False) -> None:
         with self._janitor_lock:  # the sampler thread and the main thread both tell it
