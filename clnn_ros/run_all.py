@@ -283,9 +283,15 @@ def report_failure(child) -> None:
         say(f"  {child.name}| {line}")
 
 
-def warn_forced(names: list[str]) -> None:
-    for name in names:
-        say(f"run_all: warning: node {name} did not exit in time; terminated")
+def warn_forced(forced: list[tuple[str, str]]) -> None:
+    """One line for each child that Supervisor.stop had to stop."""
+    for name, how in forced:
+        if how == "terminated":
+            say(f"run_all: warning: node {name} did not exit in time; terminated")
+        else:
+            say(f"run_all: warning: node {name} did not exit in time, nor on SIGTERM (hung in "
+                f"native code: seen in Fast DDS's participant deletion, docs/ROS_GRAPH.md); "
+                f"killed")
 
 
 def run_composed(values: dict, environment: str | None, namespace: str,
@@ -402,6 +408,7 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
         environment: str | None, env_command: list[str] | None, interrupted: list[int]) -> int:
     began = time.time()
     with tempfile.TemporaryDirectory(prefix="clnn_ros_") as tmp:
+        supervisor.remove_if_killed(Path(tmp))
         out = args.out or Path(tmp) / "out"
         values["out_dir"] = str(out.resolve())
         bag_path = None

@@ -20,12 +20,14 @@ import sys
 import threading
 import time
 from collections import deque
+from pathlib import Path
 
 from .rosenv import (own_fast_dds_files, remove_files_of_dead_process,
                      remove_unused_fast_dds_files)
 
 TAIL_LINES = 5
 _STDERR = threading.Lock()
+TERMINATE_S = 2.0  # a node stops within this of SIGTERM while its Python code runs
 SAMPLE_S = 0.5  # how often the children's shared-memory files are noted
 # "<prog>: error: <message>" (the project's one-line errors) or a ROS log line at ERROR.
 OWN_ERROR = re.compile(r"^(?:\S+: error: |\[ERROR\] \[[\d.]+\] \[[^\]]+\]: )(.*)$")
@@ -119,6 +121,10 @@ class Supervisor:
         self._tell_janitor(f"pid {child.process.pid}")
         return child
 
+    def remove_if_killed(self, directory: Path) -> None:
+        """Have the janitor remove `directory` (run_all's work directory) if run_all is killed."""
+        self._tell_janitor(f"dir {directory}")
+
     def _tell_janitor(self, *lines: str, last: bool = False) -> None:
         with self._janitor_lock:  # the sampler thread and the main thread both tell it
             try:
@@ -155,9 +161,11 @@ class Supervisor:
             for problem in remove_files_of_dead_process(child.shm_files):
                 say(f"run_all: warning: {problem}")
 
-    def stop(self, names: list[str], grace_s: float, interrupt: bool) -> list[str]:
+    def stop(self, names: list[str], grace_s: float, interrupt: bool) -> list[tuple[str, str]]:
         """Stop these children: SIGINT first if `interrupt`, else they get `grace_s` to exit
-        by themselves; then SIGTERM, then SIGKILL. Returns the names it had to terminate."""
+        by themselves; then SIGTERM, then SIGKILL. Returns (name, "terminated" or "killed") for
+        each child it had to stop: killed if it did not end on SIGTERM either (a process hung
+        in native code with Python's lock held cannot run its signal handler)."""
         chosen = [self.children[n] for n in names if n in self.children]
         if interrupt:
             for child in chosen:
@@ -167,11 +175,13 @@ class Supervisor:
         for child in chosen:
             if child.wait(deadline - time.monotonic()):
                 continue
-            forced.append(child.name)
             child.signal(signal.SIGTERM)
-            if not child.wait(2.0):
-                child.signal(signal.SIGKILL)
-                child.wait(5.0)
+            if child.wait(TERMINATE_S):
+                forced.append((child.name, "terminated"))
+                continue
+            forced.append((child.name, "killed"))
+            child.signal(signal.SIGKILL)
+            child.wait(5.0)
         return forced
 
     def close(self) -> list[str]:

@@ -3,6 +3,7 @@
 import errno
 import fcntl
 import os
+import re
 import socket
 import signal
 import subprocess
@@ -20,6 +21,19 @@ def in_private_shm() -> list[str]:
     prefix = ["unshare", "--mount", "sh", "-c", 'mount -t tmpfs tmpfs /dev/shm && exec "$@"', "_"]
     allowed = subprocess.run([*prefix, "true"], capture_output=True).returncode == 0
     return prefix if allowed else []
+
+
+# run_all's line for a node that ended neither by itself nor on SIGTERM after the episode (its
+# results and messages complete): hung in native code with Python's lock held, as Fast DDS 2.14's
+# participant deletion does now and then (docs/ROS_GRAPH.md). A node that missed its end would
+# still stop on SIGTERM ("terminated"), which no test allows.
+HUNG_IN_NATIVE = re.compile(r"^run_all: warning: node \w+ did not exit in time, nor on SIGTERM ")
+
+
+def problem_lines(stderr: str) -> list[str]:
+    """run_all's error and warning lines, but for a node hung in native code on its way out."""
+    return [line for line in stderr.splitlines()
+            if line.startswith("run_all:") and not HUNG_IN_NATIVE.match(line)]
 
 
 DOMAINS = range(1, 170)  # 0 is everyone's default; 170-232 are left to people's experiments

@@ -153,8 +153,12 @@ def test_a_node_that_fails_at_start_ends_the_run_at_once(ros_env, tmp_path, comm
 def test_killing_run_all_ends_its_children(ros_env, tmp_path, in_private_shm):
     """SIGKILL of run_all: its nodes end (stdin's end of file), the recorder finishes the bag,
     and clnn_ros.shm_janitor removes the Fast DDS files they leave (listed, where allowed, in a
-    /dev/shm of the run's own once every process of the run has ended)."""
-    marker = {**ros_env, "CLNN_TEST_RUN": str(tmp_path), "LISTING": str(tmp_path / "shm.txt")}
+    /dev/shm of the run's own once every process of the run has ended) and run_all's work
+    directory (in a temp folder of the run's own)."""
+    temp = tmp_path / "temp"
+    temp.mkdir()
+    marker = {**ros_env, "CLNN_TEST_RUN": str(tmp_path), "LISTING": str(tmp_path / "shm.txt"),
+              "TMPDIR": str(temp)}
     shm_before = fast_dds_shm_files()
     process = subprocess.Popen(
         [*in_private_shm, sys.executable, str(Path(__file__).with_name("shm_listing.py")),
@@ -172,6 +176,7 @@ def test_killing_run_all_ends_its_children(ros_env, tmp_path, in_private_shm):
     else:  # a file of this run left over is new and used by no process
         left = (fast_dds_shm_files() - shm_before) - shm_files_in_use()
     assert not left, sorted(left)
+    assert not list(temp.iterdir())
     assert "Traceback" not in stderr, stderr
 
 

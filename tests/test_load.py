@@ -19,7 +19,7 @@ from clnn_ros.core.params import Params
 
 from test_graph import processes_with, read_steps
 
-from conftest import free_domain_id, ros_environment
+from conftest import free_domain_id, problem_lines, ros_environment
 
 pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 DOMAIN_ID = free_domain_id()
@@ -61,8 +61,7 @@ def test_twenty_runs_beside_cpu_hogs_have_no_false_death_and_equal_the_core(
             report.append({"seed": seed, "exit": process.returncode, "ticks": summary.get("ticks"),
                            "ticks_per_s": round(summary.get("ticks_per_s") or 0),
                            "wall_s": round(time.monotonic() - started, 1),
-                           "problems": [line for line in stderr.splitlines()
-                                        if line.startswith("run_all:")]})
+                           "problems": problem_lines(stderr)})
             assert process.returncode == 0, (report[-1], stderr[-3000:])
             assert not report[-1]["problems"], report[-1]  # no error, no forced termination
             core = run_episode(seed, Params(trials=RUNS[seed], max_steps=MAX_STEPS))

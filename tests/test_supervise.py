@@ -1,0 +1,31 @@
+"""clnn_ros.supervise: how run_all stops a child that does not end by itself."""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+
+from clnn_ros.supervise import Supervisor
+
+IGNORES_SIGTERM = ("import signal, sys, time; signal.signal(signal.SIGTERM, signal.SIG_IGN); "
+                   "print('ready', file=sys.stderr, flush=True); time.sleep(60)")
+SLEEPS = "import sys, time; print('ready', file=sys.stderr, flush=True); time.sleep(60)"
+
+
+def test_a_child_that_ignores_sigterm_is_killed_and_told_apart_from_a_terminated_one():
+    """A process hung in native code with Python's lock held cannot run its SIGTERM handler,
+    as one that ignores SIGTERM: it is killed, and said to be, not "terminated"."""
+    supervisor = Supervisor()
+    try:
+        for name, code in (("sleeper", SLEEPS), ("stubborn", IGNORES_SIGTERM)):
+            child = supervisor.start(name, [sys.executable, "-c", code], dict(os.environ))
+            deadline = time.monotonic() + 60  # a hang bound: it has set its handler
+            while "ready" not in child.last_lines() and time.monotonic() < deadline:
+                time.sleep(0.05)
+        forced = supervisor.stop(["sleeper", "stubborn"], 0.1, interrupt=False)
+        assert forced == [("sleeper", "terminated"), ("stubborn", "killed")]
+        assert supervisor.children["stubborn"].returncode == -9
+        assert supervisor.children["sleeper"].returncode == -15
+    finally:
+        supervisor.close()
