@@ -106,8 +106,9 @@ def _run_many(weights, angles, constants, force, components, edges, offsets, max
 
 def _drop_stale_cache() -> None:
     """Numba's disk cache checks only the file of each cached function, not the core files whose
-    functions are compiled into it: after a change to one of those, the cached engine would run
-    the old rule. A digest of them beside the cache drops it then."""
+    functions are compiled into it (a documented limitation, numba/numba#1833): after a change
+    to one of those, the cached engine would run the old rule. A digest of them beside the
+    cache drops it then (through the dispatchers' cache objects: numba has no public call)."""
     core_sources = b"".join(Path(m.__file__).read_bytes() for m in (rln, physics, encoder,
                                                                     random_stream))
     digest = hashlib.sha256(core_sources).hexdigest()
