@@ -401,25 +401,25 @@ class Progress:
 def test_killed_recorders_bag_is_repaired(ros_env, tmp_path, moment):
     """SIGKILL of the recorder early (as soon as its first chunk is on disk, half a second of
     ticks in) and later: `python -m clnn_ros.bag repair` makes a finished bag of it that mcap and
-    rosbags read, every tick up to one or two chunks (half a second each) before what the
-    recorder held when it was killed."""
+    rosbags read, every tick of its complete chunks; later, up to one or two chunks (half a
+    second each) before what the recorder held when it was killed (its progress)."""
     from mcap.reader import make_reader
     process = start_run(ros_env, tmp_path)
-    progress = Progress(ros_env, tmp_path)
     broken = tmp_path / "bag"
+    early = moment == "first chunk"
+    progress = None if early else Progress(ros_env, tmp_path)  # echo starts too late for early
     deadline = time.monotonic() + 180  # a hang bound
     while time.monotonic() < deadline:
-        if moment == "first chunk":
-            if progress.last is not None and (broken / "bag_0.mcap").is_file() and \
-                    chunk_state_counts(broken / "bag_0.mcap"):
-                break
-        elif (progress.last or 0) >= 3000:
+        if early and (broken / "bag_0.mcap").is_file() and chunk_state_counts(broken /
+                                                                              "bag_0.mcap"):
+            break
+        if not early and (progress.last or 0) >= 3000:
             break
         time.sleep(0.01)
-    held = progress.last
     os.kill(child(process, "clnn_ros.nodes.recorder"), signal.SIGKILL)
-    progress.stop()
-    assert held is not None, "no progress from the recorder"
+    if progress is not None:
+        held = progress.last  # what the recorder held at least
+        progress.stop()
     time.sleep(0.5)
     os.killpg(process.pid, signal.SIGINT)
     stdout, stderr = process.communicate(timeout=30)
@@ -444,10 +444,10 @@ def test_killed_recorders_bag_is_repaired(ros_env, tmp_path, moment):
     assert info["message_count"] == len(messages) == len(raw_messages(broken, salvage=True))
     last = assert_every_tick(messages)
     assert last + 1 == sum(chunks)  # every complete chunk, nothing else
-    assert held - last <= 2 * max(chunks) + 50, (held, last, chunks)  # + progress' own lag
-    if moment == "first chunk":
+    if early:
         assert len(chunks) <= 3, chunks
     else:
+        assert held - last <= 2 * max(chunks) + 50, (held, last, chunks)  # + progress' lag
         result = subprocess.run([sys.executable, "-m", "clnn_ros.analyze", str(broken), "--out",
                                  str(tmp_path / "a"), "--salvage"], capture_output=True,
                                 text=True, timeout=60)
