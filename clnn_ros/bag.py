@@ -201,7 +201,8 @@ class BagWriter:
         self.directory.mkdir(parents=True, exist_ok=True)
         self.path = self.directory / bag_files(self.directory)[1]
         self.file = open(self.path, "wb")
-        self.writer = Writer(self.file, chunk_size=2 * CHUNK_BYTES, compression=CompressionType.ZSTD)
+        self.writer = Writer(self.file, chunk_size=2 * CHUNK_BYTES,
+                             compression=CompressionType.ZSTD)
         self.writer.start(profile="ros2", library=library)
         self.chunk_seconds = chunk_seconds
         self.chunk_bytes = 0

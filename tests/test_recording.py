@@ -247,7 +247,8 @@ def test_two_independent_readers_decode_every_field(recorded):
             by_mcap[key] = fields_of(m.ros_msg)
     by_rosbags = {}
     seen = {}
-    with AnyReader([recorded / "bag"], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+    with AnyReader([recorded / "bag"],
+                   default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
         for connection, _, data in reader.messages():
             topic = names.graph_topic(connection.topic)
             index = seen[topic] = seen.get(topic, -1) + 1
@@ -526,6 +527,10 @@ def test_sample_bag_analysis(tmp_path):
     assert math.isclose(np.mean(steps), 396.33, abs_tol=0.01)
     assert "| `/cartpole/state` | `clnn_ros_msgs/msg/CartPoleState` | 4,779 | 0-4778 | 0 |" in \
         (tmp_path / "summary.md").read_text()
+    alone = analyze(sample / f"{SAMPLE}_0.mcap", "--out", tmp_path / "from_file")  # its .mcap
+    assert alone.returncode == 0, alone.stderr
+    assert (tmp_path / "from_file" / "trials.csv").read_text() == \
+        (tmp_path / "trials.csv").read_text()
 
 
 @pytest.mark.ros
