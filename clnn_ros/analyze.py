@@ -2,6 +2,7 @@
 
     python -m clnn_ros.analyze BAG [--out DIR] [--trial N] [--salvage]
 
+BAG: a bag directory (as run_all records it: DIR/metadata.yaml, DIR/DIR_0.mcap) or its .mcap file.
 Writes into DIR (default: the bag's name without .mcap, plus _analysis):
     trials.csv          seed,trial,initial_angle_deg,steps,end_reason (as run_all writes it)
     learning_curve.png  successful steps per trial
@@ -11,10 +12,11 @@ Writes into DIR (default: the bag's name without .mcap, plus _analysis):
     final_weights.npy   the last snapshot, shape (neurons, segments, inputs), as run_all saves it
     weights.png         heat-map of the final weights
     summary.md          what the bag holds and what the run did, for a person to read
-The chosen trial (--trial, default the longest) is read from the bag's header stamps (publish
-time = sim time), decoded with the schemas embedded in the bag. Exit status: 0 done, 1 the bag
-cannot be read (missing, not MCAP, truncated: --salvage reads the complete chunks of a file
-whose recorder was killed), 2 bad arguments (an unknown --trial).
+The chosen trial (--trial, default the longest) is read from the messages' header stamps (sim
+time), decoded with the schemas embedded in the bag. Exit status: 0 done, 1 the bag cannot be
+read (missing, not MCAP, truncated: --salvage reads the complete chunks of a file whose recorder
+was killed, `python -m clnn_ros.bag repair` makes a finished copy), 2 bad arguments (an unknown
+--trial).
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .bag import BagError, Decoder, iter_raw, open_bag
+from .bag import BagError, Decoder, iter_raw, mcap_file, open_bag
 from .cli import OneLineArgumentParser
 from .core.params import ParamError, Params, params_from_strings
 from .message_fields import (END, END_REASONS, EPISODE_END, REACHED_MAX_STEPS, START,
@@ -68,10 +70,10 @@ def run_parameters(reader) -> tuple[Params, dict]:
 
 def read_bag(path: Path, salvage: bool):
     """One pass over the bag: events and weights decoded, ticks of every per-tick topic counted
-    from the publish time (sim time), the raw states, spikes and actions kept per tick."""
+    from the header stamps (sim time), the raw states, spikes and actions kept per tick."""
     reader, stream = open_bag(path, salvage)
     with stream:
-        params, given = run_parameters(path if salvage else reader)
+        params, given = run_parameters(mcap_file(path) if salvage else reader)
         tau_ns = round(params.tau * 1e9)
         decode = Decoder()
         events, weights = [], []
@@ -80,7 +82,7 @@ def read_bag(path: Path, salvage: bool):
         schemas = {}
         counts = {topic: 0 for topic in TOPIC_TYPES}
         recorded_as = {}  # relative name: the name in the bag (its namespace)
-        for schema, topic, publish_ns, _log_ns, data, name in iter_raw(reader):
+        for schema, topic, sim_ns, _log_ns, data, name in iter_raw(reader):
             recorded_as[topic] = name
             counts[topic] = counts.get(topic, 0) + 1
             if topic == TRIAL_EVENT:
@@ -88,7 +90,7 @@ def read_bag(path: Path, salvage: bool):
             elif topic == WEIGHTS:
                 weights.append(decode(schema, data))
             elif topic in ticks:
-                tick = publish_ns // tau_ns
+                tick = sim_ns // tau_ns
                 ticks[topic].append(tick)
                 if topic in raw:
                     raw[topic][tick] = data
@@ -313,7 +315,8 @@ def summary_markdown(bag_path: Path, result: dict, salvage: bool) -> str:
 def main(argv=None) -> int:
     parser = OneLineArgumentParser(prog="python -m clnn_ros.analyze", name="analyze",
                                    description=__doc__.split("\n\n")[0])
-    parser.add_argument("bag", type=Path, help="an MCAP file recorded by run_all")
+    parser.add_argument("bag", type=Path, help="a bag directory recorded by run_all (or its "
+                        ".mcap file)")
     parser.add_argument("--out", type=Path, help="output folder (default: <bag>_analysis)")
     parser.add_argument("--trial", type=int, help="trial to plot (default: the longest)")
     parser.add_argument("--salvage", action="store_true",

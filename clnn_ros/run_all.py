@@ -9,14 +9,15 @@ episode and print a summary.
 
 Each node runs as its own process (`python -m clnn_ros.nodes.<name>`) with the same parameters
 YAML; DDS discovery stays on loopback unless ROS_AUTOMATIC_DISCOVERY_RANGE says otherwise.
-A recorder process writes every topic into a rosbag2-compatible MCAP file (docs/RECORDING.md):
-<out>/run.mcap with --out, else bags/run_<UTC time>.mcap, or --bag FILE; --no-record: none.
+A recorder process writes every topic into a rosbag2 bag directory (docs/RECORDING.md):
+<out>/bag/ with --out, else bags/run_<UTC time>/, or --bag DIR; --no-record: none.
 Exit status: 0 done, 1 the graph failed (stall, crashed node), 2 bad input, 130 interrupted.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import shlex
@@ -31,6 +32,7 @@ import yaml
 
 from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
 
+from . import bag
 from .cli import OneLineArgumentParser
 from .core.checkpoint import Checkpoint, load_checkpoint
 from .core.params import ParamError, Params, params_from_strings
@@ -94,8 +96,9 @@ def parse_args(argv):
                         help="seconds without progress before the graph is declared stalled "
                              f"(default {RUN_SETTINGS['stall_timeout_s']:g})")
     parser.add_argument("--quiet", action="store_true", help="no per-trial progress lines")
-    parser.add_argument("--bag", type=Path, help="record every topic into this MCAP file "
-                        "(default: <out>/run.mcap with --out, else bags/run_<UTC time>.mcap)")
+    parser.add_argument("--bag", type=Path, help="record every topic into this bag directory "
+                        "(DIR/metadata.yaml, DIR/DIR_0.mcap; an earlier bag there is replaced; "
+                        "default: <out>/bag with --out, else bags/run_<UTC time>)")
     parser.add_argument("--no-record", action="store_true", help="do not record a bag")
     parser.add_argument("--init-weights", metavar="FILE|fig7|fig12",
                         help="a checkpoint .npz (e.g. <out>/checkpoint.npz): resume its episode "
@@ -118,9 +121,13 @@ def check_paths_and_commands(parser: argparse.ArgumentParser, args) -> None:
     if args.bag is not None:
         if args.no_record:
             parser.error("--bag names the recording that --no-record turns off: give one of them")
-        if args.bag.is_dir():
-            parser.error(f"--bag {args.bag} is a directory; expected an MCAP file path")
-        if problem := cannot_create(args.bag.parent):
+        if args.bag.exists() and not args.bag.is_dir():
+            parser.error(f"--bag {args.bag} is a file; expected a bag directory (created if "
+                         f"missing)")
+        if args.bag.is_dir() and (others := bag.foreign_files(args.bag)):
+            parser.error(f"--bag {args.bag} holds other files than a bag ({others[0]}, ...): "
+                         f"give a new directory, or an earlier bag's")
+        if problem := cannot_create(args.bag):
             parser.error(f"--bag {args.bag}: {problem}")
     if args.env_node is not None:
         try:
@@ -331,10 +338,9 @@ def run_composed(values: dict, environment: str | None, namespace: str,
 
 def start_recorder(supervisor: Supervisor, values: dict, bag_path: Path, workdir: Path,
                    namespace: str) -> None:
-    """The recorder: its own process, also in composed mode; OSError if the bag cannot be
-    created."""
-    bag_path.parent.mkdir(parents=True, exist_ok=True)
-    open(bag_path, "wb").close()
+    """The recorder: its own process, also in composed mode; OSError if the bag's directory
+    cannot be created."""
+    bag_path.mkdir(parents=True, exist_ok=True)
     params_file = workdir / "recorder_params.yaml"
     params_file.write_text(yaml.safe_dump({"/**": {"ros__parameters": {
         **values, "bag_path": str(bag_path)}}}))
@@ -352,10 +358,10 @@ def stop_recorder(supervisor: Supervisor, episode_ended: bool) -> bool:
 
 
 def default_bag_path(out_dir: Path | None) -> Path:
-    """<out>/run.mcap with --out, else bags/run_<UTC time>.mcap under the current directory."""
+    """<out>/bag with --out, else bags/run_<UTC time> under the current directory."""
     if out_dir is not None:
-        return Path(out_dir) / "run.mcap"
-    return Path("bags") / time.strftime("run_%Y%m%d_%H%M%S.mcap", time.gmtime())
+        return Path(out_dir) / "bag"
+    return Path("bags") / time.strftime("run_%Y%m%d_%H%M%S", time.gmtime())
 
 
 def fresh_summary(out: Path, since: float) -> dict:
@@ -452,8 +458,8 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
               f"{summary['ticks_per_s'] or 0.0:.0f} ticks/s"
               + (f"; results in {args.out}" if args.out else ""))
     if bag_path is not None:
-        if bag_path.exists() and bag_path.stat().st_size == 0:
-            bag_path.unlink()  # created here to check it could be; the recorder never started
+        with contextlib.suppress(OSError):
+            bag_path.rmdir()  # empty: created here to check it could be; nothing was recorded
         print(f"run_all: bag {bag_path}" if bag_path.exists() else
               f"run_all: nothing recorded, no bag", flush=True)
     if failed:
@@ -462,7 +468,7 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
         say("run_all: interrupted")
         return status
     if status == NOT_STARTED and bag_path is not None:
-        bag_path.unlink(missing_ok=True)  # what it holds is another graph's
+        bag.remove_bag(bag_path)  # what it holds is another graph's
     if status != 0:
         reason = summary.get("exit_reason") or reason or \
             f"the trial manager exited with status {status}"

@@ -66,8 +66,8 @@ def separate_runs(runs: int, episode: list[str], workdir: Path) -> list[str]:
             forced.append(run + 1)
         if result.returncode != 0 or left or new_shm:
             print(f"process run {run + 1} stderr:\n{result.stderr}", file=sys.stderr, flush=True)
-        if not (out / "run.mcap").stat().st_size:
-            problems.append(f"run {run + 1} left an empty bag")
+        if not (out / "bag" / "metadata.yaml").is_file():
+            problems.append(f"run {run + 1} left no finished bag")
     if forced:  # handled (terminated, its files removed), but worth knowing
         print(f"process runs {forced}: a node did not exit within run_all's grace period and was "
               f"terminated", flush=True)

@@ -72,9 +72,10 @@ RUN_ALL_CASES = [  # (arguments, what the one error line says)
     (["--stall-timeout", "-1"], "stall_timeout_s must be a finite number > 0, got -1.0"),
     (["--out", "file.txt"], "--out file.txt is a file; expected a directory"),
     (["--out", "file.txt/out"], "file.txt is not a directory"),
-    (["--bag", "file.txt/run.mcap"], "file.txt is not a directory"),
-    (["--bag", "."], "--bag . is a directory; expected an MCAP file path"),
-    (["--bag", "run.mcap", "--no-record"], "--no-record turns off"),
+    (["--bag", "file.txt/bag"], "file.txt is not a directory"),
+    (["--bag", "file.txt"], "--bag file.txt is a file; expected a bag directory"),
+    (["--bag", "."], "--bag . holds other files than a bag"),
+    (["--bag", "bag", "--no-record"], "--no-record turns off"),
     (["--env-node", ""], "--env-node needs a command"),
     (["--env-node", "no_such_program_clnn"], "--env-node: no program 'no_such_program_clnn'"),
     (["--env-node", "python 'node.py"], "No closing quotation"),
@@ -111,7 +112,7 @@ RUN_ALL_CASES = [  # (arguments, what the one error line says)
      "angle_span_deg (13) must be below angle_limit_deg (12)"),
 ]
 # Through a real run_all process as well (the rest in-process, the same main()).
-SUBPROCESS_CASES = {"--seed abc", "--trials 0", "--out file.txt", "--bag file.txt/run.mcap",
+SUBPROCESS_CASES = {"--seed abc", "--trials 0", "--out file.txt", "--bag file.txt/bag",
                     "--params-file malformed.yaml", "--env-node no_such_program_clnn"}
 
 NODE_CASES = [  # (node, its arguments after --ros-args, what the one error line says)

@@ -79,7 +79,7 @@ def test_killed_process_is_named_at_once_and_the_graph_comes_down(ros_env, tmp_p
     if node != "recorder":  # a killed recorder leaves its complete chunks (test_recording)
         # Finalized (read without --salvage): every tick up to the fault, but for what the
         # killed process had sent and nobody had received yet.
-        messages = raw_messages(tmp_path / "run.mcap")
+        messages = raw_messages(tmp_path / "bag")
         assert assert_every_tick(messages, tail_allowance=2) > 50
     assert not processes_with(str(tmp_path))
 
@@ -116,7 +116,7 @@ def test_silent_node_is_named_after_the_stall_timeout(ros_env, tmp_path):
     assert process.returncode == 1
     assert error_lines(stderr) == ["run_all: error: stall: node 'environment' went silent at "
                                    "tick 50 (no progress for 1 s)"]
-    assert assert_every_tick(raw_messages(tmp_path / "run.mcap")) == 49
+    assert assert_every_tick(raw_messages(tmp_path / "bag")) == 49
     assert not processes_with(str(tmp_path))
 
 
@@ -145,7 +145,7 @@ def test_a_node_that_fails_at_start_ends_the_run_at_once(ros_env, tmp_path, comm
     lines = error_lines(run.stderr)
     assert len(lines) == 1 and lines[0].startswith("run_all: error: ") and \
         "node 'environment' exited with status" in lines[0], run.stderr[-2000:]
-    assert not (tmp_path / "run.mcap").exists()  # nothing was recorded: no bag
+    assert not (tmp_path / "bag").exists()  # nothing was recorded: no bag
     assert "run_all: nothing recorded, no bag" in run.stdout
     assert not processes_with(str(tmp_path))
 
@@ -170,7 +170,7 @@ def test_killing_run_all_ends_its_children(ros_env, tmp_path, in_private_shm):
     os.kill(int((tmp_path / "shm.txt.pid").read_text()), signal.SIGKILL)
     _, stderr = process.communicate(timeout=120)
     assert not processes_with(str(tmp_path))
-    assert raw_messages(tmp_path / "run.mcap")  # the recorder finished the bag on its way out
+    assert raw_messages(tmp_path / "bag")  # the recorder finished the bag on its way out
     if in_private_shm:
         left = {name for name in (tmp_path / "shm.txt").read_text().split() if "fastrtps" in name}
     else:  # a file of this run left over is new and used by no process
@@ -192,7 +192,7 @@ def test_a_second_graph_on_the_same_domain_and_namespace_is_refused(ros_env, tmp
         lines = error_lines(second.stderr)
         assert len(lines) == 1 and lines[0].startswith(
             "run_all: error: another graph runs in namespace / on ROS domain"), second.stderr
-        assert not (tmp_path / "second" / "run.mcap").exists()  # it held the other's messages
+        assert not (tmp_path / "second" / "bag").exists()  # it held the other's messages
         assert first.poll() is None  # the first run goes on
     finally:
         os.killpg(first.pid, signal.SIGINT)

@@ -138,14 +138,15 @@ def assert_equals_core(out: Path, seed: int):
 
 
 def recorded(out: Path) -> dict[str, list]:
-    """topic -> [(publish time = sim time, decoded message)] in the order recorded (one publisher
-    per topic). Not the log time: it is the wall clock. Not the CDR bytes either: Fast CDR leaves
-    the alignment padding between fields uninitialized, so equal messages may differ there."""
+    """topic -> [(sim time (the header stamp), decoded message)] in the order recorded (one
+    publisher per topic). Not the log or publish time: they are the wall clock. Not the CDR bytes
+    either: Fast CDR leaves the alignment padding between fields uninitialized, so equal messages
+    may differ there."""
     from rclpy.serialization import deserialize_message
     by_topic = defaultdict(list)
-    for _, topic, publish_time, _, data, _ in raw_messages(out / "run.mcap"):
+    for _, topic, sim_time, _, data, _ in raw_messages(out / "bag"):
         message_type = bag.message_class(names.TOPIC_TYPES[topic])
-        by_topic[topic].append((publish_time, deserialize_message(data, message_type)))
+        by_topic[topic].append((sim_time, deserialize_message(data, message_type)))
     return dict(by_topic)
 
 
@@ -186,7 +187,7 @@ def test_two_graphs_at_once_on_two_domains_do_not_see_each_other(concurrent_runs
     assert_equals_core(seed_2, 2)
     states = []
     for out in (seed_1, seed_2):
-        messages = raw_messages(out / "run.mcap")
+        messages = raw_messages(out / "bag")
         assert_every_tick(messages)
         ticks = [m[2] for m in messages if m[1] == STATE]
         assert len(ticks) == len(set(ticks))  # one state per tick: no second graph's

@@ -138,11 +138,12 @@ def test_definitions():
     assert (Action.FORCE_NEGATIVE, Action.FORCE_POSITIVE) == (-1, 1)
     assert (Action.NEURON_NEGATIVE_FORCE, Action.NEURON_POSITIVE_FORCE) == (0, 1)
     assert (Reward.KIND_REWARD, Reward.KIND_PUNISH, Reward.KIND_NONE) == ("reward", "punish", "none")
-    assert (CartPoleState.FAILURE_NONE, CartPoleState.FAILURE_POLE_ANGLE,
-            CartPoleState.FAILURE_CART_POSITION) == ("", "pole_angle", "cart_position")
+    assert (CartPoleState.FAILURE_POLE_ANGLE, CartPoleState.FAILURE_CART_POSITION) == (
+        "pole_angle", "cart_position")
+    assert CartPoleState().failure_reason == ""  # not failed (no constant: see the .msg)
     reasons = message_fields.FAILURE_REASONS
     assert (reasons[CONTINUE], reasons[FAIL_ANGLE], reasons[FAIL_POSITION]) == (
-        CartPoleState.FAILURE_NONE, CartPoleState.FAILURE_POLE_ANGLE,
+        CartPoleState().failure_reason, CartPoleState.FAILURE_POLE_ANGLE,
         CartPoleState.FAILURE_CART_POSITION)
     assert list(Reward().reward_one_hot) == [0, 0]
 

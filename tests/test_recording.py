@@ -1,5 +1,6 @@
-"""Recording (clnn_ros.nodes.recorder via run_all), reading the bag with two independent readers,
-faults (Ctrl-C, a killed recorder) and the offline analysis (clnn_ros.analyze)."""
+"""Recording (clnn_ros.nodes.recorder via run_all) into rosbag2 bag directories, reading them with
+two independent readers and converting them with rosbags-convert, faults (Ctrl-C, a killed
+recorder and its repaired bag) and the offline analysis (clnn_ros.analyze)."""
 
 from __future__ import annotations
 
@@ -7,9 +8,11 @@ import array
 import csv
 import math
 import os
+import shutil
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -26,6 +29,7 @@ from conftest import free_domain_id, ros_environment
 
 DOMAIN_ID = free_domain_id()
 REPO = Path(__file__).resolve().parents[1]
+SAMPLE = "sample_seed0_12trials"  # bags/SAMPLE/, the sample recording
 PER_TICK = names.PER_TICK
 
 
@@ -42,17 +46,17 @@ def recorded(ros_env, tmp_path_factory):
                           "--trials", "12", "--max-steps", "2000", "--out", str(out)],
                          env=ros_env, capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr
-    assert f"run_all: recording to {out / 'run.mcap'}" in run.stdout
-    assert f"run_all: bag {out / 'run.mcap'}" in run.stdout
-    analysis = subprocess.run([sys.executable, "-m", "clnn_ros.analyze", str(out / "run.mcap"),
+    assert f"run_all: recording to {out / 'bag'}" in run.stdout
+    assert f"run_all: bag {out / 'bag'}" in run.stdout
+    analysis = subprocess.run([sys.executable, "-m", "clnn_ros.analyze", str(out / "bag"),
                                "--out", str(out / "analysis")], capture_output=True, text=True,
                               timeout=60)
     assert analysis.returncode == 0, analysis.stderr
     return out
 
 
-def tick_of(publish_ns: int) -> int:
-    return publish_ns // 20_000_000
+def tick_of(sim_ns: int) -> int:
+    return sim_ns // 20_000_000
 
 
 def raw_messages(path: Path, salvage=False):
@@ -103,7 +107,7 @@ def test_analysis_equals_the_live_run(recorded):
 def test_bag_layout_is_rosbag2(recorded):
     """Schemas, hashes, QoS and the rosbag2 metadata record, as ros2 bag writes them."""
     from mcap.reader import make_reader
-    with open(recorded / "run.mcap", "rb") as f:
+    with open(recorded / "bag" / "bag_0.mcap", "rb") as f:
         reader = make_reader(f)
         assert reader.get_header().profile == "ros2"
         summary = reader.get_summary()
@@ -119,18 +123,77 @@ def test_bag_layout_is_rosbag2(recorded):
         assert channel.metadata["topic_type_hash"].startswith("RIHS01_")
         qos = yaml.safe_load(channel.metadata["offered_qos_profiles"])
         assert qos[0]["reliability"] == "reliable" and qos[0]["durability"] == "volatile"
+        assert qos[0]["history"] == "unknown"  # DDS does not tell a publisher's history
     text = summary.schemas[channels[STATE].schema_id].data.decode()
     assert "\n" + "=" * 80 + "\nMSG: std_msgs/Header\n" in text
     assert "\n" + "=" * 80 + "\nMSG: builtin_interfaces/Time\n" in text
     assert summary.chunk_indexes and all(c.compression == "zstd" for c in summary.chunk_indexes)
+    # The last `rosbag2` record (rosbag2 also writes one when the bag opens) is metadata.yaml's.
     info = yaml.safe_load(metadata["rosbag2"]["serialized_metadata"])
+    assert {"rosbag2_bagfile_information": info} == \
+        yaml.safe_load((recorded / "bag" / "metadata.yaml").read_text())
     assert info["version"] == 9 and info["storage_identifier"] == "mcap"
-    assert info["message_count"] == summary.statistics.message_count
+    assert info["relative_file_paths"] == ["bag_0.mcap"] and info["ros_distro"] == "jazzy"
+    assert info["message_count"] == summary.statistics.message_count == \
+        info["files"][0]["message_count"]
+    assert info["starting_time"]["nanoseconds_since_epoch"] == \
+        summary.statistics.message_start_time
+    assert info["duration"]["nanoseconds"] == \
+        summary.statistics.message_end_time - summary.statistics.message_start_time
     counts = {t["topic_metadata"]["name"]: t["message_count"]
               for t in info["topics_with_message_count"]}
     assert counts == {channels[t].topic: summary.statistics.channel_message_counts[channels[t].id]
                       for t in channels}
+    for topic in info["topics_with_message_count"]:  # version 9: a list, the channel's QoS
+        metadata_qos = topic["topic_metadata"]["offered_qos_profiles"]
+        channel = channels[names.graph_topic(topic["topic_metadata"]["name"])]
+        assert isinstance(metadata_qos, list) and metadata_qos == \
+            yaml.safe_load(channel.metadata["offered_qos_profiles"])
+        assert topic["topic_metadata"]["type_description_hash"] == \
+            channel.metadata["topic_type_hash"]
     assert '"seed": 0' in metadata["clnn_ros"]["parameters"]
+
+
+def read_all_with_rosbags(path: Path) -> int:
+    """Every message of a bag decoded by rosbags' AnyReader (from the schemas in the bag)."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+    count = 0
+    with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        for connection, _, data in reader.messages():
+            reader.deserialize(data, connection.msgtype)
+            count += 1
+    return count
+
+
+@pytest.mark.ros
+def test_rosbags_reads_and_converts_a_run(ros_env, tmp_path):
+    """The acceptance run: its bag directory is rosbag2 version 9 (QoS profiles as YAML lists);
+    rosbags decodes every message, and rosbags-convert to sqlite3 and back keeps them all."""
+    run = subprocess.run([sys.executable, "-m", "clnn_ros.run_all", "--quiet", "--seed", "1",
+                          "--trials", "32", "--out", str(tmp_path)], env=ros_env,
+                         capture_output=True, text=True, timeout=180)
+    assert run.returncode == 0, run.stderr
+    recorded = tmp_path / "bag"
+    info = yaml.safe_load((recorded / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert info["version"] == 9 and info["storage_identifier"] == "mcap"
+    assert info["relative_file_paths"] == ["bag_0.mcap"] and info["custom_data"] is None
+    assert {t["topic_metadata"]["name"] for t in info["topics_with_message_count"]} == \
+        {names.absolute(t) for t in names.TOPIC_TYPES}
+    for topic in info["topics_with_message_count"]:
+        profiles = topic["topic_metadata"]["offered_qos_profiles"]
+        assert isinstance(profiles, list) and profiles[0]["reliability"] == "reliable"
+    count = read_all_with_rosbags(recorded)
+    assert count == info["message_count"] > 0
+    convert = shutil.which("rosbags-convert", path=str(Path(sys.executable).parent))
+    for source, destination, storage in ((recorded, tmp_path / "as_sqlite3", "sqlite3"),
+                                         (tmp_path / "as_sqlite3", tmp_path / "back", "mcap")):
+        result = subprocess.run([convert, "--src", str(source), "--dst", str(destination),
+                                 "--dst-storage", storage], capture_output=True, text=True,
+                                timeout=120)
+        assert result.returncode == 0, result.stdout + result.stderr
+        assert read_all_with_rosbags(destination) == count, destination
+    assert list((tmp_path / "as_sqlite3").glob("*.db3"))
 
 
 def plain(value):
@@ -170,12 +233,13 @@ def test_two_independent_readers_decode_every_field(recorded):
 
     from mcap.reader import make_reader
 
-    path = recorded / "run.mcap"
+    path = recorded / "bag" / "bag_0.mcap"
     raw = {}  # (topic, sequence) -> CDR; the recorder numbers each topic's messages 0, 1, ...
     with open(path, "rb") as f:
         for _, channel, message in make_reader(f).iter_messages():
             raw[(names.graph_topic(channel.topic), message.sequence)] = message.data
-            assert message.publish_time == bag.stamp_ns(message.data)
+            # as rosbag2: the publisher's source timestamp, then the receive time (wall clock)
+            assert bag.stamp_ns(message.data) < message.publish_time <= message.log_time
     by_mcap = {}
     for m in read_ros2_messages(path):
         key = (names.graph_topic(m.channel.topic), m.sequence_count)
@@ -183,7 +247,8 @@ def test_two_independent_readers_decode_every_field(recorded):
             by_mcap[key] = fields_of(m.ros_msg)
     by_rosbags = {}
     seen = {}
-    with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+    with AnyReader([recorded / "bag"],
+                   default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
         for connection, _, data in reader.messages():
             topic = names.graph_topic(connection.topic)
             index = seen[topic] = seen.get(topic, -1) + 1
@@ -284,35 +349,137 @@ def test_echo_topics_then_ctrl_c_leaves_a_complete_bag(ros_env, tmp_path):
     os.killpg(process.pid, signal.SIGINT)
     _, stderr = process.communicate(timeout=30)
     assert process.returncode == 130 and "Traceback" not in stderr, stderr
-    messages = raw_messages(tmp_path / "run.mcap")  # finished: summary and index present
+    messages = raw_messages(tmp_path / "bag")  # finished: summary and index present
     assert assert_every_tick(messages) > 50
     assert not processes_with(str(tmp_path))
 
 
+def chunk_state_counts(path: Path) -> list[int]:
+    """The /cartpole/state messages (one per tick) of each complete chunk of an MCAP file that may
+    end in an unfinished one, in file order."""
+    from mcap.exceptions import McapError
+    from mcap.records import Channel, Chunk, Message
+    from mcap.stream_reader import StreamReader, breakup_chunk
+    counts, state_channels = [], set()
+    with open(path, "rb") as f:
+        try:
+            for record in StreamReader(f, emit_chunks=True).records:
+                if isinstance(record, Chunk):
+                    inner = breakup_chunk(record)
+                    state_channels |= {r.id for r in inner if isinstance(r, Channel)
+                                       and names.graph_topic(r.topic) == STATE}
+                    counts.append(sum(isinstance(r, Message) and r.channel_id in state_channels
+                                      for r in inner))
+        except McapError:  # the end of what the recorder wrote
+            pass
+    return counts
+
+
+class Progress:
+    """The recorder's progress (the last tick it holds on every per-tick topic), as
+    clnn_ros.echo prints it from /_recorder/progress."""
+
+    def __init__(self, env, run_dir: Path):
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "clnn_ros.echo", "/" + names.RECORDED, "--wait", "180"],
+            env={**env, "CLNN_TEST_RUN": str(run_dir)}, stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE, text=True)
+        self.last = None
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self):
+        for line in self.process.stdout:
+            if line.startswith("data: "):
+                self.last = int(line.split()[1])
+
+    def stop(self):
+        self.process.send_signal(signal.SIGINT)
+        self.process.communicate(timeout=30)
+
+
 @pytest.mark.ros
-def test_killed_recorder_leaves_its_complete_chunks(ros_env, tmp_path):
+@pytest.mark.parametrize("moment", ["first chunk", "tick 3000"])
+def test_killed_recorders_bag_is_repaired(ros_env, tmp_path, moment):
+    """SIGKILL of the recorder early (as soon as its first chunk is on disk, half a second of
+    ticks in) and later: `python -m clnn_ros.bag repair` makes a finished bag of it that mcap and
+    rosbags read, every tick of its complete chunks; later, up to one or two chunks (half a
+    second each) before what the recorder held when it was killed (its progress)."""
+    from mcap.reader import make_reader
     process = start_run(ros_env, tmp_path)
-    path = tmp_path / "run.mcap"
-    deadline = time.monotonic() + 60
-    while (not path.exists() or path.stat().st_size < 20_000) and time.monotonic() < deadline:
-        time.sleep(0.05)  # the first chunks are on disk
-    assert path.stat().st_size >= 20_000
+    broken = tmp_path / "bag"
+    early = moment == "first chunk"
+    progress = None if early else Progress(ros_env, tmp_path)  # echo starts too late for early
+    deadline = time.monotonic() + 180  # a hang bound
+    while time.monotonic() < deadline:
+        if early and (broken / "bag_0.mcap").is_file() and chunk_state_counts(broken /
+                                                                              "bag_0.mcap"):
+            break
+        if not early and (progress.last or 0) >= 3000:
+            break
+        time.sleep(0.01)
     os.kill(child(process, "clnn_ros.nodes.recorder"), signal.SIGKILL)
+    if progress is not None:
+        held = progress.last  # what the recorder held at least
+        progress.stop()
     time.sleep(0.5)
     os.killpg(process.pid, signal.SIGINT)
     stdout, stderr = process.communicate(timeout=30)
     assert "node 'recorder' died (SIGKILL)" in stderr, stderr
+    assert not (broken / "metadata.yaml").exists()
     with pytest.raises(bag.BagError, match="truncated"):
-        bag.open_bag(path)
+        bag.open_bag(broken)
         pytest.fail(f"the bag is complete\n{stdout[-2000:]}\n{stderr[-2000:]}")
-    messages = raw_messages(path, salvage=True)
-    assert assert_every_tick(messages) > 200
-    result = subprocess.run([sys.executable, "-m", "clnn_ros.analyze", str(path), "--out",
-                             str(tmp_path / "a"), "--salvage"], capture_output=True, text=True,
-                            timeout=60)
-    assert result.returncode == 0, result.stderr
-    assert "salvaged" in (tmp_path / "a" / "summary.md").read_text()
+    chunks = chunk_state_counts(broken / "bag_0.mcap")
+
+    result = tool(ros_env, "clnn_ros.bag", "repair", broken)
+    fixed = tmp_path / "bag_repaired"
+    assert result.returncode == 0 and "Traceback" not in result.stderr, result.stderr
+    assert result.stdout.startswith("bag: ") and f"in {fixed}" in result.stdout
+    info = yaml.safe_load((fixed / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert info["version"] == 9 and info["relative_file_paths"] == ["bag_repaired_0.mcap"]
+    with open(fixed / "bag_repaired_0.mcap", "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary.statistics.message_count == info["message_count"] == \
+        read_all_with_rosbags(fixed)
+    messages = raw_messages(fixed)
+    assert info["message_count"] == len(messages) == len(raw_messages(broken, salvage=True))
+    last = assert_every_tick(messages)
+    assert last + 1 == sum(chunks)  # every complete chunk, nothing else
+    if early:
+        assert len(chunks) <= 3, chunks
+    else:
+        assert held - last <= 2 * max(chunks) + 50, (held, last, chunks)  # + progress' lag
+        result = subprocess.run([sys.executable, "-m", "clnn_ros.analyze", str(broken), "--out",
+                                 str(tmp_path / "a"), "--salvage"], capture_output=True,
+                                text=True, timeout=60)
+        assert result.returncode == 0, result.stderr
+        assert "salvaged" in (tmp_path / "a" / "summary.md").read_text()
     assert not processes_with(str(tmp_path))
+
+
+def test_repair_refuses_bad_input_with_one_line(tmp_path):
+    text = tmp_path / "text.mcap"
+    text.write_text("not a bag\n")
+    (tmp_path / "empty_dir").mkdir()
+    header_only = tmp_path / "header_only.mcap"
+    header_only.write_bytes((REPO / "bags" / SAMPLE / f"{SAMPLE}_0.mcap").read_bytes()[:200])
+    cases = ((tmp_path / "missing", "no such file or directory"),
+             (text, "not an MCAP file"),
+             (tmp_path / "empty_dir", "no .mcap file in the directory"),
+             (header_only, "no complete chunk"))
+    for path, message in cases:
+        result = subprocess.run([sys.executable, "-m", "clnn_ros.bag", "repair", str(path)],
+                                capture_output=True, text=True, timeout=60)
+        assert result.returncode == 1, (path, result.stderr)
+        assert message in result.stderr and "Traceback" not in result.stderr, result.stderr
+        assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["empty_dir", "header_only.mcap",
+                                                         "text.mcap"]  # no half-written copy
+    result = subprocess.run([sys.executable, "-m", "clnn_ros.bag", "repair",
+                             str(REPO / "bags" / SAMPLE), "--out", str(tmp_path / "empty_dir")],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 1 and "exists" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
 
 
 # --- analyze: bad input ------------------------------------------------------------------------
@@ -324,22 +491,24 @@ def analyze(*args):
 
 @pytest.mark.ros
 def test_analyze_refuses_bad_bags_with_one_line(recorded, tmp_path):
-    good = recorded / "run.mcap"
+    good = recorded / "bag" / "bag_0.mcap"
     truncated = tmp_path / "truncated.mcap"
     truncated.write_bytes(good.read_bytes()[: good.stat().st_size // 2])
     text = tmp_path / "text.mcap"
     text.write_text("not a bag\n")
+    (tmp_path / "no_bag").mkdir()
     for path, status, message in ((tmp_path / "missing.mcap", 1, "no such file"),
                                   (text, 1, "not an MCAP file"),
                                   (truncated, 1, "truncated"),
-                                  (tmp_path / "empty.mcap", 1, "not an MCAP file")):
+                                  (tmp_path / "empty.mcap", 1, "not an MCAP file"),
+                                  (tmp_path / "no_bag", 1, "no .mcap file in the directory")):
         if path.name == "empty.mcap":
             path.write_bytes(b"")
         result = analyze(path, "--out", tmp_path / "x")
         assert result.returncode == status, result.stderr
         assert message in result.stderr and "Traceback" not in result.stderr
         assert len(result.stderr.strip().splitlines()) == 1
-    result = analyze(good, "--out", tmp_path / "x", "--trial", "99")
+    result = analyze(recorded / "bag", "--out", tmp_path / "x", "--trial", "99")
     assert result.returncode == 2 and "trial 99 is not in the bag" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
 
@@ -347,7 +516,7 @@ def test_analyze_refuses_bad_bags_with_one_line(recorded, tmp_path):
 # --- the sample recording in bags/ -------------------------------------------------------------
 
 def test_sample_bag_analysis(tmp_path):
-    sample = REPO / "bags" / "sample_seed0_12trials.mcap"
+    sample = REPO / "bags" / SAMPLE
     if not sample.exists():
         pytest.skip("no sample bag")
     result = analyze(sample, "--out", tmp_path)
@@ -358,13 +527,17 @@ def test_sample_bag_analysis(tmp_path):
     assert math.isclose(np.mean(steps), 396.33, abs_tol=0.01)
     assert "| `/cartpole/state` | `clnn_ros_msgs/msg/CartPoleState` | 4,779 | 0-4778 | 0 |" in \
         (tmp_path / "summary.md").read_text()
+    alone = analyze(sample / f"{SAMPLE}_0.mcap", "--out", tmp_path / "from_file")  # its .mcap
+    assert alone.returncode == 0, alone.stderr
+    assert (tmp_path / "from_file" / "trials.csv").read_text() == \
+        (tmp_path / "trials.csv").read_text()
 
 
 @pytest.mark.ros
 def test_sigterm_stops_a_recorder_that_recorded_nothing(ros_env, tmp_path):
     """A recorder alone (no graph yet) told to stop with SIGTERM: a clean exit, and no bag,
     since nothing was recorded."""
-    path = tmp_path / "alone.mcap"
+    path = tmp_path / "alone"
     process = subprocess.Popen([sys.executable, "-m", "clnn_ros.nodes.recorder", "--ros-args",
                                 "-p", f"bag_path:={path}"], env=ros_env, stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True)

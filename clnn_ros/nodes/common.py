@@ -8,6 +8,7 @@ tick; anything else is refused with a logged reason (throttled) and the node's s
 
 from __future__ import annotations
 
+import inspect
 import os
 import signal
 import sys
@@ -221,6 +222,23 @@ def make_executor(context=None):
     from rclpy.experimental import EventsExecutor
     return EventsExecutor(context=context)
 
+
+
+class WithMessageInfo:
+    """A subscription callback `function(message, message_info)` under either executor: rclpy
+    passes the message info to a callback of two parameters, its SingleThreadedExecutor as two
+    arguments, but rclpy 7.1's EventsExecutor as one (message, info) tuple, measured here (a
+    plain two-parameter function then fails with SystemError)."""
+
+    __signature__ = inspect.Signature([inspect.Parameter(name, inspect.Parameter.POSITIONAL_ONLY)
+                                       for name in ("message", "message_info")])
+
+    def __init__(self, function: Callable[[object, dict], None]):
+        self.function = function
+
+    def __call__(self, *arguments) -> None:
+        message, info = arguments if len(arguments) == 2 else arguments[0]
+        self.function(message, info)
 
 def catch_signals() -> list[int]:
     """Record SIGINT and SIGTERM instead of raising: the spin loop then ends between two

@@ -1,6 +1,7 @@
-"""Recorder node: every topic of the graph into one rosbag2-compatible MCAP file (clnn_ros.bag).
+"""Recorder node: every topic of the graph into one rosbag2 bag directory (clnn_ros.bag), as
+`ros2 bag record -s mcap -o NAME` writes it: NAME/metadata.yaml and NAME/NAME_0.mcap.
 
-    python -m clnn_ros.nodes.recorder --ros-args -p bag_path:=run.mcap [--params-file P]
+    python -m clnn_ros.nodes.recorder --ros-args -p bag_path:=NAME [--params-file P]
 
 It subscribes raw (the CDR bytes, never decoded) to clock, trial/event, cartpole/state,
 rln/spikes, rln/reward, rln/action and rln/weights (in its namespace) with a deep reader queue,
@@ -8,12 +9,14 @@ and announces "recorder" on _graph/ready once each subscription sees its publish
 makes the trial manager wait for it (run setting extra_nodes), so the first tick is recorded.
 Every 20 ms it publishes on _recorder/progress the last tick it holds on every per-tick topic;
 the trial manager keeps the graph within RECORDER_WINDOW ticks of it, so a slow recorder loses
-nothing. The file is finished (rosbag2 metadata, summary, index) on EPISODE_END (a normal end,
-or a stall the trial manager detected), on Ctrl-C, on SIGTERM and when run_all goes away.
-Complete chunks are flushed as they fill, so a SIGKILL loses at most the open chunk. A bag that
-holds no message is removed. The run's parameters are stored in the bag's `clnn_ros` metadata
-record. Exit status 0, 130/143 after a signal, 2 for bad parameters, 1 if the bag cannot be
-written (a full disk: one line).
+nothing. Each message keeps its receive time (log_time) and its publisher's source timestamp
+(publish_time), as Jazzy's recorder does. The bag is finished (rosbag2 metadata, summary,
+index, metadata.yaml) on EPISODE_END (a normal end, or a stall the trial manager detected), on
+Ctrl-C, on SIGTERM and when run_all goes away. A chunk goes to the file half a second after its
+first message (bag.CHUNK_SECONDS), so a SIGKILL loses at most that; `python -m clnn_ros.bag
+repair` then makes a finished copy. A bag that holds no message is removed. The run's
+parameters are stored in the bag's `clnn_ros` metadata record. Exit status 0, 130/143 after a
+signal, 2 for bad parameters, 1 if the bag cannot be written (a full disk: one line).
 """
 
 from __future__ import annotations
@@ -26,7 +29,6 @@ from pathlib import Path
 
 from .. import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
 
-from mcap.writer import CompressionType, Writer
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
@@ -40,8 +42,8 @@ from ..core.params import ParamError, Params
 from ..files import describe_write_error
 from ..names import (CLOCK, PER_TICK, READY, RECORDED, RECORDER, TOPIC_TYPES,
                      TRIAL_EVENT)
-from .common import (PROGRESS_QOS, READY_QOS, qos_profile, ros_session, spin_until_finished,
-                     steady_clock)
+from .common import (PROGRESS_QOS, READY_QOS, WithMessageInfo, qos_profile, ros_session,
+                     spin_until_finished, steady_clock)
 from .parameters import declare_parameters
 
 RECORD_QOS = qos_profile(qos.RECORD)
@@ -57,28 +59,21 @@ class RecorderNode(Node):
                          parameter_overrides=[Parameter(k, value=v)
                                               for k, v in (overrides or {}).items()])
         params, settings = declare_parameters(
-            self, own={"bag_path": ("", "the MCAP file the recorder writes")})
+            self, own={"bag_path": ("", "the bag directory the recorder writes")})
         bag_path = settings.pop("bag_path")
         if not bag_path:
-            raise ParamError("bag_path is not set (-p bag_path:=FILE.mcap)")
+            raise ParamError("bag_path is not set (-p bag_path:=DIRECTORY)")
         self.path = Path(bag_path)
         self.failure = None  # why the bag could not be written (a full disk)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.file = open(self.path, "wb")
-        # Every index type, message indexes included (rosbags finds no message without them).
-        self.writer = Writer(self.file, chunk_size=bag.CHUNK_SIZE,
-                             compression=CompressionType.ZSTD)
-        self.writer.start(profile="ros2", library="clnn_ros recorder")
+        self.bag = bag.BagWriter(self.path, "clnn_ros recorder")
         defaults = Params().to_dict()
         given = {k: list(v) if isinstance(v, tuple) else v
                  for k, v in params.to_dict().items() if v != defaults[k]}
-        self.writer.add_metadata("clnn_ros", {
+        self.bag.add_metadata("clnn_ros", {
             "parameters": json.dumps({**given, **settings}, sort_keys=True),
             "namespace": self.get_namespace(), "bag_format": "clnn_ros.bag"})
         self.channels = {}     # topic -> channel id
-        self.topics = []       # rosbag2 topic metadata
         self.counts = {topic: 0 for topic in TOPIC_TYPES}
-        self.first_ns = self.last_ns = None
         self.last_tick = {}    # per-tick topic -> sim time of its last message
         self.missing = 0       # messages of per-tick topics that never arrived (gaps)
         self.subscriptions_by_topic = {}
@@ -100,29 +95,22 @@ class RecorderNode(Node):
         if channel is None:
             type_name = TOPIC_TYPES[topic]
             resolved = self.subscriptions_by_topic[topic].topic_name
-            schema = self.writer.register_schema(name=type_name, encoding="ros2msg",
-                                                 data=bag.schema_text(type_name).encode())
-            qos = bag.qos_yaml([info.qos_profile
-                                for info in self.get_publishers_info_by_topic(resolved)])
-            digest = bag.type_hash(type_name)
-            channel = self.channels[topic] = self.writer.register_channel(
-                topic=resolved, message_encoding="cdr", schema_id=schema,
-                metadata={"topic_type_hash": digest, "offered_qos_profiles": qos})
-            self.topics.append({"name": resolved, "type": type_name, "qos": qos, "hash": digest,
-                                "topic": topic})
+            qos = bag.qos_dicts([info.qos_profile
+                                 for info in self.get_publishers_info_by_topic(resolved)])
+            channel = self.channels[topic] = self.bag.add_topic(
+                resolved, type_name, bag.schema_text(type_name), qos, bag.type_hash(type_name))
         return channel
 
     def _receiver(self, topic: str):
-        def receive(data: bytes) -> None:
+        def receive(data: bytes, info: dict) -> None:
             if self.failure:
                 return
-            now = time.time_ns()
             self.last_message_at = time.monotonic()
             stamp = bag.stamp_ns(data)
             try:
                 channel = self.channels.get(topic) or self._channel(topic)
-                self.writer.add_message(channel_id=channel, log_time=now, data=data,
-                                        publish_time=stamp, sequence=self.counts[topic])
+                self.bag.write(channel, info["received_timestamp"], info["source_timestamp"],
+                               data, self.counts[topic])
             except OSError as error:  # the graph ends: a bag with holes would be lost silently
                 self.failure = describe_write_error(error, self.path)
                 self.finish(1)
@@ -133,12 +121,9 @@ class RecorderNode(Node):
                     self.missing += max(0, round((stamp - previous) / self.tau_ns) - 1)
                 self.last_tick[topic] = stamp
             self.counts[topic] += 1
-            if self.first_ns is None:
-                self.first_ns = now
-            self.last_ns = now
             if topic == TRIAL_EVENT and self.episode_end_at is None and self.ends_episode(data):
                 self.episode_end_at = time.monotonic()
-        return receive
+        return WithMessageInfo(receive)
 
     def ends_episode(self, data: bytes) -> bool:
         """An EPISODE_END of this graph's clock: its tick is the last clock's or the next (a
@@ -148,8 +133,16 @@ class RecorderNode(Node):
         return event.event == TrialEvent.EPISODE_END and clock <= event.tick <= clock + 1
 
     def _poll(self) -> None:
-        """Announce readiness once every subscription sees its publisher; report progress;
-        after EPISODE_END, finish when no message came for LINGER_S."""
+        """Announce readiness once every subscription sees its publisher; report progress; write
+        out a chunk that is due though no message came; after EPISODE_END, finish when no
+        message came for LINGER_S."""
+        if not self.failure:
+            try:
+                self.bag.flush_if_due()
+            except OSError as error:
+                self.failure = describe_write_error(error, self.path)
+                self.finish(1)
+                return
         if self._ready_publisher is not None:
             if all(s.get_publisher_count() >= 1 for s in self.subscriptions_by_topic.values()):
                 try:
@@ -174,8 +167,9 @@ class RecorderNode(Node):
             self.finished.set_result(code)
 
     def close(self) -> str:
-        """Write the rosbag2 metadata record, the summary and the index (idempotent); a bag
-        that holds no message is removed. Returns what became of the bag, one line."""
+        """Finish the bag: the rosbag2 metadata record, the summary and the index, metadata.yaml
+        (idempotent); a bag that holds no message is removed. Returns what became of the bag,
+        one line."""
         if self.closed:
             return ""
         self.closed = True
@@ -184,22 +178,17 @@ class RecorderNode(Node):
             if not self.failure:
                 for topic in TOPIC_TYPES:
                     self._channel(topic)
-                start = self.first_ns or time.time_ns()
-                self.writer.add_metadata("rosbag2", {
-                    "serialized_metadata": bag.rosbag2_metadata(
-                        self.path, self.topics, self.counts, start, self.last_ns or start),
-                    "ROS_DISTRO": "jazzy"})
-                self.writer.finish()
-            self.file.close()
+            self.bag.close(finalize=not self.failure)
         except OSError as error:
             self.failure = self.failure or describe_write_error(error, self.path)
         if total == 0:
-            self.path.unlink(missing_ok=True)
+            bag.remove_bag(self.path)
             return f"nothing recorded: {self.path} removed"
         if self.failure:
             return f"{total} messages in {self.path}, not finalized ({self.failure}; " \
-                   f"--salvage reads its complete chunks)"
-        return f"{total} messages in {self.path} ({os.path.getsize(self.path) / 1e6:.2f} MB)"
+                   f"`python -m clnn_ros.bag repair` copies its complete chunks)"
+        return f"{total} messages in {self.path} " \
+               f"({os.path.getsize(self.bag.path) / 1e6:.2f} MB)"
 
 
 def main(argv: list[str] | None = None) -> int:
