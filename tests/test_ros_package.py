@@ -29,7 +29,7 @@ LAUNCH_PACKAGES = {"launch", "launch_ros"}
 
 def setup_distribution():
     """setup.py's metadata, read as colcon reads it (run_setup up to the configuration)."""
-    from setuptools import distutils  # noqa: F401  (setuptools' distutils, as colcon uses it)
+    import setuptools  # noqa: F401  (first: distutils is then setuptools' own, as for colcon)
     from distutils.core import run_setup
     cwd = os.getcwd()
     os.chdir(PACKAGE_DIR)
