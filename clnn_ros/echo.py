@@ -1,15 +1,19 @@
-"""Print the live messages of a topic as YAML, in the layout of `ros2 topic echo` (no ROS CLI
-is needed: rclpy only). Run it against a graph started in another terminal (same ROS_DOMAIN_ID).
+"""Print the live messages of a topic as `ros2 topic echo` does (no ROS CLI is needed: rclpy
+only). Run it against a graph started in another terminal (same ROS_DOMAIN_ID).
 
     python -m clnn_ros.echo /cartpole/state
     python -m clnn_ros.echo /rln/action --once
     python -m clnn_ros.echo /cartpole/state --field pole_angle_deg
-    python -m clnn_ros.echo /rln/spikes --raster      # one row per tick: tick 12 trial 0 |....#.|
+    python -m clnn_ros.echo /rln/spikes --flow-style    # {header: {...}, tick: 12, spikes: [0, 1]}
+    python -m clnn_ros.echo /cartpole/state --csv       # one line per message, for plotting
+    python -m clnn_ros.echo /rln/spikes --raster        # one row per tick: tick 12 trial 0 |..#.|
 
-Messages are separated by `---`; arrays of numbers or strings are printed inline ([0, 1, 0]).
-The graph's topics are known in advance (echo may start before the graph); any other topic
-must be published within --wait seconds. Exit status: 0 after --once, 130 on Ctrl-C, 1 for an
-unknown topic or field.
+As ros2topic's echo (rosidl_runtime_py's message_to_yaml and message_to_csv): YAML in block
+style, fields in declaration order, `---` after each message, `{}` for a message without fields;
+--flow-style: collections inline; --csv: every field, nested ones flattened, comma-separated,
+no separator. The graph's topics are known in advance (echo may start before the graph); any
+other topic must be published within --wait seconds. Exit status: 0 after --once, 130 on
+Ctrl-C, 1 for an unknown topic or field, 2 for bad options.
 """
 
 from __future__ import annotations
@@ -32,64 +36,39 @@ class EchoError(Exception):
     pass
 
 
-def _scalar(value) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    text = yaml.safe_dump(value, default_flow_style=True, width=10**9).strip()
-    return text[:-4].strip() if text.endswith("\n...") else text.removesuffix("...").strip()
-
-
-def _inline(values) -> str:
-    """A list of scalars in YAML flow style, strings quoted where YAML needs it."""
-    return yaml.safe_dump([_plain(v) for v in values], default_flow_style=True,
-                          width=10**9).strip()
-
-
 def _is_message(value) -> bool:
     return hasattr(value, "get_fields_and_field_types")
 
 
-def _plain(value):
-    if isinstance(value, (bytes, bytearray, array.array)):
-        return list(value)
-    if hasattr(value, "tolist"):
-        return value.tolist()
+def to_plain(value):
+    """A message as nested dicts (fields in declaration order) and lists of Python scalars, as
+    rosidl_runtime_py's message_to_ordereddict makes it: a byte is its character."""
+    if _is_message(value):
+        return {name: to_plain(getattr(value, name)) for name in value.get_fields_and_field_types()}
+    if isinstance(value, bytes):
+        return "".join(map(chr, value))
+    if hasattr(value, "tolist"):  # array.array, a numpy array or number
+        value = value.tolist()
+    if isinstance(value, (list, tuple)):
+        return [to_plain(item) for item in value]
     return value
 
 
-def to_yaml_lines(value, indent: int = 0) -> list[str]:
-    """A message as `ros2 topic echo` prints it: fields in declaration order, nested messages
-    indented by two spaces, arrays of scalars inline."""
-    pad = " " * indent
-    lines = []
-    for name in value.get_fields_and_field_types():
-        field = _plain(getattr(value, name))
-        if _is_message(field):
-            lines.append(f"{pad}{name}:")
-            lines += to_yaml_lines(field, indent + 2)
-        elif isinstance(field, (list, tuple)):
-            if field and _is_message(field[0]):
-                lines.append(f"{pad}{name}:")
-                for item in field:
-                    sub = to_yaml_lines(item, indent + 2)
-                    sub[0] = f"{pad}- " + sub[0][indent + 2:]
-                    lines += sub
-            else:
-                lines.append(f"{pad}{name}: {_inline(field)}")
-        else:
-            lines.append(f"{pad}{name}: {_scalar(field)}")
-    return lines
+def to_yaml(value, flow_style: bool = False) -> str:
+    """A message (or one field of it) as message_to_yaml writes it, ending in a newline."""
+    text = yaml.safe_dump(to_plain(value), default_flow_style=flow_style, sort_keys=False,
+                          allow_unicode=True, width=sys.maxsize)
+    return text.removesuffix("...\n")  # a lone scalar: no end-of-document marker
 
 
-def format_value(value) -> str:
-    value = _plain(value)
+def to_csv(value) -> str:
+    """A message (or one field of it) as message_to_csv writes it: every leaf, depth first,
+    comma-separated, as Python's str() writes it (True, 0.5, b'x')."""
     if _is_message(value):
-        return "\n".join(to_yaml_lines(value))
-    if isinstance(value, (list, tuple)):
-        return _inline(value)
-    return _scalar(value)
+        return ",".join(to_csv(getattr(value, name)) for name in value.get_fields_and_field_types())
+    if isinstance(value, (list, tuple, array.array)) or getattr(value, "ndim", 0):
+        return ",".join(to_csv(item) for item in value)
+    return str(value)
 
 
 def get_field(msg, path: str):
@@ -117,7 +96,7 @@ class Raster:
                 self.out.write(f"#   {i:2d} {label}\n")
             self.out.write("#" + " " * 25 + "|" + "".join(str(i % 10) for i in
                                                          range(len(labels))) + "|\n")
-        row = "".join("#" if s else "." for s in _plain(msg.spikes))
+        row = "".join("#" if s else "." for s in msg.spikes)
         self.out.write(f"tick {msg.tick:9d} trial {msg.trial:4d} |{row}|\n")
 
 
@@ -132,14 +111,14 @@ def topic_type(node, topic: str, wait_s: float) -> str:
     except InvalidTopicNameException as error:
         why = str(error).splitlines()[0].removeprefix("Invalid topic name: ").rstrip(":")
         raise EchoError(f"'{topic}' is not a topic name: {why}") from None
-    known_name = graph_topic(node.resolve_topic_name(topic))
-    if known_name in TOPIC_TYPES:
-        return TOPIC_TYPES[known_name]
+    resolved = node.resolve_topic_name(topic)
+    if graph_topic(resolved) in TOPIC_TYPES:
+        return TOPIC_TYPES[graph_topic(resolved)]
     deadline = time.monotonic() + wait_s
     while True:
         known = dict(node.get_topic_names_and_types())
-        if topic in known:
-            return known[topic][0]
+        if resolved in known:
+            return known[resolved][0]
         if time.monotonic() > deadline:
             names = sorted(set(known) | {absolute(name) for name in TOPIC_TYPES})
             raise EchoError(f"unknown topic '{topic}' (not published within {wait_s:g} s; "
@@ -153,11 +132,18 @@ def main(argv=None) -> int:
     parser.add_argument("topic")
     parser.add_argument("--once", action="store_true", help="print one message and exit")
     parser.add_argument("--field", help="print only this field, e.g. header.stamp or pole_angle_deg")
-    parser.add_argument("--raster", action="store_true",
-                        help="/rln/spikes as one row per tick: tick T trial N |..#...|")
+    style = parser.add_mutually_exclusive_group()
+    style.add_argument("--flow-style", action="store_true",
+                       help="YAML with collections inline: {sec: 0, nanosec: 20000000}")
+    style.add_argument("--csv", action="store_true",
+                       help="one line per message: every field, comma-separated (for plotting)")
+    style.add_argument("--raster", action="store_true",
+                       help="/rln/spikes as one row per tick: tick T trial N |..#...|")
     parser.add_argument("--wait", type=float, default=3.0,
                         help="seconds to wait for a topic that is not one of the graph's (3)")
     args = parser.parse_args(argv)
+    if args.raster and args.field:
+        parser.error("--raster prints whole SpikeVectors: not with --field")
     import rclpy  # after the arguments: --help and a usage error need no ROS
     from .nodes.common import qos_profile, ros_session
     with ros_session() as received:
@@ -179,8 +165,9 @@ def main(argv=None) -> int:
                 if raster is not None:
                     raster(msg)
                 else:
-                    text = format_value(get_field(msg, args.field) if args.field else msg)
-                    sys.stdout.write(text + "\n---\n")
+                    value = get_field(msg, args.field) if args.field else msg
+                    sys.stdout.write(to_csv(value) + "\n" if args.csv else
+                                     to_yaml(value, args.flow_style) + "---\n")
                 sys.stdout.flush()
                 printed.append(1)
 

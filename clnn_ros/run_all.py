@@ -148,6 +148,11 @@ def check_paths_and_commands(parser: argparse.ArgumentParser, args) -> None:
             parser.error(f"--namespace {args.namespace!r}: {problem}")
 
 
+def graph_namespace(args) -> str:
+    """The namespace of the run's nodes and topics: "/" or "/NAME"."""
+    return "/" + args.namespace.strip("/") if args.namespace else "/"
+
+
 def namespace_problem(name: str) -> str | None:
     """Why `name` is not a ROS namespace (tokens of letters, digits and _, not starting with a
     digit, separated by /), or None."""
@@ -221,6 +226,12 @@ def checkpoint_values(checkpoint: Checkpoint) -> dict:
             "nsv": checkpoint.params.nsv}
 
 
+def write_params(path: Path, values: dict) -> Path:
+    """A params file that gives every node these values."""
+    path.write_text(yaml.safe_dump({"/**": {"ros__parameters": values}}))
+    return path
+
+
 def ros_arguments(params_file: Path, namespace: str) -> list[str]:
     """The --ros-args of every node of the run: the parameters, and the namespace with the sim
     clock moved into it (use_sim_time subscribes to the absolute /clock)."""
@@ -240,9 +251,7 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
     """Start the nodes (env_command None: no environment) and watch them until the trial
     manager ends. Returns (its exit status, or 128 + signal; whether run_all saw a process fail
     itself, and said so: one that exited with an error or a signal)."""
-    params_file = workdir / "params.yaml"
-    params_file.write_text(yaml.safe_dump({"/**": {"ros__parameters": values}}))
-    arguments = ros_arguments(params_file, namespace)
+    arguments = ros_arguments(write_params(workdir / "params.yaml", values), namespace)
     for name in NODES:
         command = env_command if name == "environment" else \
             [sys.executable, "-m", f"clnn_ros.nodes.{name}"]
@@ -341,9 +350,8 @@ def start_recorder(supervisor: Supervisor, values: dict, bag_path: Path, workdir
     """The recorder: its own process, also in composed mode; OSError if the bag's directory
     cannot be created."""
     bag_path.mkdir(parents=True, exist_ok=True)
-    params_file = workdir / "recorder_params.yaml"
-    params_file.write_text(yaml.safe_dump({"/**": {"ros__parameters": {
-        **values, "bag_path": str(bag_path)}}}))
+    params_file = write_params(workdir / "recorder_params.yaml",
+                               {**values, "bag_path": str(bag_path)})
     supervisor.start(RECORDER, [sys.executable, "-m", "clnn_ros.nodes.recorder",
                                 *ros_arguments(params_file, namespace)], child_environment())
 
@@ -389,7 +397,7 @@ def main(argv=None) -> int:
         print("run_all: error: --env gymnasium steps gymnasium's tau of 0.02 s, got tau="
               f"{values['tau']}", file=sys.stderr)
         return 2
-    namespace = "/" + args.namespace.strip("/") if args.namespace else "/"
+    namespace = graph_namespace(args)
     environment = None if args.env == "external" else args.env
     env_command = None
     if args.env_node is not None:

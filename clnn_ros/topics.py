@@ -3,12 +3,18 @@
     python -m clnn_ros.topics            # /cartpole/state [clnn_ros_msgs/msg/CartPoleState] ...
     python -m clnn_ros.topics --count    # and how many publishers and subscribers each has
 
-It listens (DDS discovery) on this ROS_DOMAIN_ID until the topic list is stable, prints, exits.
-Exit status 0; 130 on Ctrl-C.
+It listens (DDS discovery) on this ROS_DOMAIN_ID until what it has found is complete and
+settled, prints, exits. Complete: every endpoint's node has announced itself and every node
+announced has endpoints (on a loaded machine a participant's endpoints can come seconds after
+its announcement, or before it). Settled: nothing changed for as long as discovery had taken
+until the last change (at least 1 s), so a slow machine is given proportionally longer. Its own
+endpoints are not counted. Exit status 0 (a warning line if it gave up after --wait); 130 on
+Ctrl-C.
 """
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 
@@ -16,7 +22,7 @@ from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before r
 
 from .cli import OneLineArgumentParser
 
-OWN = {"/parameter_events", "/rosout"}  # this tool's own node has these
+MIN_QUIET_S = 1.0
 
 
 def is_hidden(name: str) -> bool:
@@ -24,41 +30,76 @@ def is_hidden(name: str) -> bool:
     return any(part.startswith("_") for part in name.split("/"))
 
 
+def graph_view(node) -> tuple[dict, bool]:
+    """What discovery has found, but this node's own endpoints: {topic: (types, publishers,
+    subscribers)}, each endpoint as (node namespace, node name, gid); and whether it is
+    complete: the nodes that own the endpoints are the nodes announced (an endpoint whose node
+    has not announced it has rmw's placeholder name)."""
+    me = (node.get_namespace(), node.get_name())
+    view, owners = {}, set()
+    for name, types in node.get_topic_names_and_types():
+        publishers, subscribers = (
+            frozenset((e.node_namespace, e.node_name, tuple(e.endpoint_gid)) for e in endpoints
+                      if (e.node_namespace, e.node_name) != me)
+            for endpoints in (node.get_publishers_info_by_topic(name),
+                              node.get_subscriptions_info_by_topic(name)))
+        if publishers or subscribers:
+            view[name] = (tuple(types), publishers, subscribers)
+            owners |= {(namespace, owner) for namespace, owner, _ in publishers | subscribers}
+    announced = {(namespace, name) for name, namespace in node.get_node_names_and_namespaces()}
+    return view, owners == announced - {me}
+
+
+def discover(node, wait_s: float, received: list[int]) -> tuple[dict, bool]:
+    """The graph view once complete and settled, or after wait_s; and whether it settled."""
+    import rclpy
+    start = last_change = time.monotonic()
+    view = {}
+    while not received:
+        rclpy.spin_once(node, timeout_sec=0.1)
+        now = time.monotonic()
+        found, complete = graph_view(node)
+        if found != view:
+            view, last_change = found, now
+        if view and complete and now - last_change >= max(MIN_QUIET_S, last_change - start):
+            return view, True
+        if now - start > wait_s:
+            break
+    return view, False
+
+
 def main(argv=None) -> int:
     parser = OneLineArgumentParser(prog="python -m clnn_ros.topics", name="topics",
                                    description=__doc__.split("\n\n")[0])
     parser.add_argument("--count", action="store_true",
                         help="also the number of publishers and subscribers")
-    parser.add_argument("--wait", type=float, default=5.0,
-                        help="at most this many seconds of discovery (5); it lists as soon as "
-                             "the graph's topics have been stable for 1 s")
+    parser.add_argument("--wait", type=float, default=10.0,
+                        help="at most this many seconds of discovery (10); it lists as soon as "
+                             "what it found is complete and settled")
     parser.add_argument("--include-hidden-topics", action="store_true",
                         help="also the plumbing (names with a part starting with _)")
     args = parser.parse_args(argv)
     import rclpy  # after the arguments: --help and a usage error need no ROS
     from .nodes.common import ros_session
     with ros_session() as received:
-        node = rclpy.create_node("topics", start_parameter_services=False, enable_rosout=False)
+        # hidden (ROS's convention) and this process's own: its endpoints are left out
+        node = rclpy.create_node(f"_topics_{os.getpid()}", start_parameter_services=False,
+                                 enable_rosout=False)
         try:
-            start = changed = time.monotonic()
-            seen = set()
-            while not received:  # until --wait, or once other topics appeared and stay the same 1 s
-                rclpy.spin_once(node, timeout_sec=0.05)
-                now = time.monotonic()
-                names = {name for name, _ in node.get_topic_names_and_types()}
-                if names != seen:
-                    seen, changed = names, now
-                if now - start > args.wait or (names - OWN and now - changed > 1.0):
-                    break
+            view, settled = discover(node, args.wait, received)
             if received:
                 return 128 + received[0]
-            for name, types in sorted(node.get_topic_names_and_types()):
+            if not settled:
+                print(f"topics: warning: discovery had not settled after {args.wait:g} s "
+                      f"(--wait): the list may be incomplete" if view else
+                      f"topics: no other participant found in {args.wait:g} s on this "
+                      f"ROS_DOMAIN_ID", file=sys.stderr)
+            for name, (types, publishers, subscribers) in sorted(view.items()):
                 if not args.include_hidden_topics and is_hidden(name):
                     continue
                 line = f"{name} [{', '.join(types)}]"
                 if args.count:
-                    line += (f"  publishers {node.count_publishers(name)}, subscribers "
-                             f"{node.count_subscribers(name)}")
+                    line += f"  publishers {len(publishers)}, subscribers {len(subscribers)}"
                 print(line)
             return 0
         except BrokenPipeError:
@@ -66,6 +107,7 @@ def main(argv=None) -> int:
             return 0
         finally:
             node.destroy_node()
+
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -323,7 +323,7 @@ def test_echo_topics_then_ctrl_c_leaves_a_complete_bag(ros_env, tmp_path):
                             "failure_reason", "successful_steps"]
     assert fields["header"]["stamp"]["nanosec"] == fields["tick"] * 20_000_000 % 10**9
     spikes = tool(ros_env, "clnn_ros.echo", "/rln/spikes", "--once")
-    assert "\nspikes: [" in spikes.stdout and "\ninput_labels: ['pole_angle[" in spikes.stdout
+    assert "\nspikes:\n- " in spikes.stdout and "\ninput_labels:\n- pole_angle[" in spikes.stdout
     stamp = tool(ros_env, "clnn_ros.echo", "/rln/action", "--once", "--field", "header.stamp")
     assert list(yaml.safe_load(stamp.stdout.split("---")[0])) == ["sec", "nanosec"]
     # Marked as the run's: if a wait below fails, the test's cleanup stops it too.

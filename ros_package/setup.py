@@ -1,0 +1,46 @@
+"""The ament_python package clnn_ros, for `colcon build` in a ROS 2 workspace: the code of
+../clnn_ros (a link), an executable in lib/clnn_ros for each node and each of the user's
+commands, the launch file and the package manifest. pip installs the same code from
+../pyproject.toml (its version is package.xml's: tests/test_ros_package.py checks)."""
+
+import xml.etree.ElementTree as ElementTree
+from pathlib import Path
+
+from setuptools import find_packages, setup
+
+PACKAGE = "clnn_ros"
+HERE = Path(__file__).resolve().parent
+# `ros2 run clnn_ros <executable>`: every node, then the user's commands (pyproject's scripts)
+EXECUTABLES = {
+    "environment": "clnn_ros.nodes.environment:main",
+    "gymnasium_env": "clnn_ros.nodes.gymnasium_env:main",
+    "encoder": "clnn_ros.nodes.encoder:main",
+    "reward": "clnn_ros.nodes.reward:main",
+    "agent": "clnn_ros.nodes.agent:main",
+    "trial_manager": "clnn_ros.nodes.trial_manager:main",
+    "recorder": "clnn_ros.nodes.recorder:main",
+    "run_all": "clnn_ros.run_all:main",
+    "echo": "clnn_ros.echo:main",
+    "topics": "clnn_ros.topics:main",
+    "analyze": "clnn_ros.analyze:main",
+    "reproduce": "clnn_ros.reproduce.__main__:main",
+    "check_env": "clnn_ros.check_env_node:main",
+    "save_checkpoint": "clnn_ros.save_checkpoint:main",
+}
+
+if __name__ == "__main__":
+    setup(
+        name=PACKAGE,
+        version=ElementTree.parse(HERE / "package.xml").findtext("version"),
+        packages=find_packages(include=[PACKAGE, f"{PACKAGE}.*"]),
+        package_data={PACKAGE: ["fastdds_profile.xml"]},
+        data_files=[
+            ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+            (f"share/{PACKAGE}", ["package.xml"]),
+            (f"share/{PACKAGE}/launch", ["launch/graph.launch.py"]),
+        ],
+        install_requires=["setuptools"],
+        zip_safe=True,
+        entry_points={"console_scripts": [f"{name} = {target}"
+                                          for name, target in EXECUTABLES.items()]},
+    )

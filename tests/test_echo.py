@@ -1,0 +1,164 @@
+"""clnn_ros.echo prints as `ros2 topic echo` does (rosidl_runtime_py's message_to_yaml and
+message_to_csv: block-style YAML, --flow-style, --csv, `{}` for a message without fields), and
+clnn_ros.topics --count counts every endpoint of a graph of several participants."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from sensor_msgs.msg import Imu
+from std_msgs.msg import Byte, Empty, UInt8MultiArray
+
+from clnn_ros.echo import to_csv, to_yaml
+from clnn_ros_msgs.msg import CartPoleState, SpikeVector
+
+from test_graph import wait_for_line
+
+from conftest import free_domain_id, ros_environment
+
+PROBE = Path(__file__).with_name("probe_participant.py")
+SPIKES_FIELDS = "{header: {stamp: {sec: 3, nanosec: 5}}, tick: 7, trial: 1, spikes: [0, 1, 0], " \
+                "input_labels: ['pole_angle[-1,0)deg', 'b: c', x], spiking_inputs: [1]}"
+SPIKES_BLOCK = """\
+header:
+  stamp:
+    sec: 3
+    nanosec: 5
+  frame_id: ''
+tick: 7
+trial: 1
+spikes:
+- 0
+- 1
+- 0
+input_labels:
+- pole_angle[-1,0)deg
+- 'b: c'
+- x
+spiking_inputs:
+- 1
+"""
+SPIKES_FLOW = "{header: {stamp: {sec: 3, nanosec: 5}, frame_id: ''}, tick: 7, trial: 1, spikes: " \
+              "[0, 1, 0], input_labels: ['pole_angle[-1,0)deg', 'b: c', x], spiking_inputs: [1]}\n"
+SPIKES_CSV = "3,5,,7,1,0,1,0,pole_angle[-1,0)deg,b: c,x,1"
+
+
+def spikes() -> SpikeVector:
+    msg = SpikeVector(tick=7, trial=1, spikes=[0, 1, 0], spiking_inputs=[1],
+                      input_labels=["pole_angle[-1,0)deg", "b: c", "x"])
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 3, 5
+    return msg
+
+
+def test_a_message_in_block_flow_and_csv_style():
+    assert to_yaml(spikes()) == SPIKES_BLOCK
+    assert to_yaml(spikes(), flow_style=True) == SPIKES_FLOW
+    assert to_csv(spikes()) == SPIKES_CSV
+
+
+def test_a_message_without_fields_is_braces_in_yaml_and_an_empty_csv_line():
+    assert to_yaml(Empty()) == to_yaml(Empty(), flow_style=True) == "{}\n"
+    assert to_csv(Empty()) == ""
+
+
+def test_scalars_bytes_and_arrays_as_rosidl_runtime_py_writes_them():
+    state = CartPoleState(pole_angle_deg=-1.5e-7, failed=True, failure_reason="pole_angle")
+    assert "\npole_angle_deg: -1.5e-07\npole_angular_velocity_deg_per_s: 0.0\nfailed: true\n" \
+           "failure_reason: pole_angle\n" in to_yaml(state)
+    assert to_csv(state).endswith(",0.0,-1.5e-07,0.0,True,pole_angle,0")
+    # a field alone (--field): no YAML end-of-document marker after a scalar
+    assert to_yaml(state.failure_reason) == "pole_angle\n"
+    assert to_yaml(state.header.frame_id) == "''\n"
+    assert to_yaml(spikes().spikes) == "- 0\n- 1\n- 0\n" and to_csv(spikes().spikes) == "0,1,0"
+    assert to_yaml(Byte(data=b"A")) == "data: A\n" and to_csv(Byte(data=b"A")) == "b'A'"
+    imu = Imu()  # a fixed-size array is a numpy array
+    imu.orientation_covariance[0] = 0.5
+    assert to_yaml(imu.orientation_covariance, flow_style=True) == f"[0.5{', 0.0' * 8}]\n"
+    assert to_csv(imu.orientation_covariance) == "0.5" + ",0.0" * 8
+    assert to_csv(UInt8MultiArray(data=[1, 2])) == ",0,1,2"  # layout.dim is empty
+
+
+@pytest.mark.parametrize("options, error", [
+    (["--csv", "--flow-style"], "echo: error: argument --flow-style: not allowed with argument --csv"),
+    (["--raster", "--field", "tick"], "echo: error: --raster prints whole SpikeVectors: not with --field"),
+])
+def test_options_that_do_not_go_together(options, error):
+    run = subprocess.run([sys.executable, "-m", "clnn_ros.echo", "/rln/spikes", *options],
+                         capture_output=True, text=True, timeout=60)
+    assert run.returncode == 2 and run.stderr == error + "\n"
+
+
+@pytest.fixture(scope="module")
+def ros_env(tmp_path_factory):
+    return ros_environment(free_domain_id(), tmp_path_factory)
+
+
+def start_probe(env, topic: str, type_name: str, fields: str, nodes: int = 1):
+    probe = subprocess.Popen([sys.executable, str(PROBE), topic, type_name, fields, str(nodes)],
+                             env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    wait_for_line(probe.stdout, "ready")
+    return probe
+
+
+def stop(probes) -> None:
+    for probe in probes:
+        probe.stdin.close()  # it exits when its standard input closes
+    for probe in probes:
+        try:
+            probe.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            probe.kill()
+            probe.wait()
+
+
+def tool(env, module, *args):
+    return subprocess.run([sys.executable, "-m", module, *args], env=env, capture_output=True,
+                          text=True, timeout=120)  # a bound against a hang
+
+
+def echo_once(env, topic, *options) -> str:
+    # not one of the graph's topics: it must be discovered (a generous bound on a loaded machine)
+    run = tool(env, "clnn_ros.echo", topic, "--once", "--wait", "60", *options)
+    assert run.returncode == 0 and run.stderr == "", run.stderr
+    return run.stdout
+
+
+@pytest.mark.ros
+def test_echo_a_live_topic_in_each_style(ros_env):
+    probes = [start_probe(ros_env, "/probe/spikes", "clnn_ros_msgs/msg/SpikeVector", SPIKES_FIELDS),
+              start_probe(ros_env, "/probe/empty", "std_msgs/msg/Empty", "{}")]
+    try:
+        assert echo_once(ros_env, "/probe/spikes") == SPIKES_BLOCK + "---\n"
+        assert echo_once(ros_env, "/probe/spikes", "--flow-style") == SPIKES_FLOW + "---\n"
+        assert echo_once(ros_env, "/probe/spikes", "--csv") == SPIKES_CSV + "\n"
+        assert echo_once(ros_env, "/probe/spikes", "--field", "header.stamp") == \
+            "sec: 3\nnanosec: 5\n---\n"
+        assert echo_once(ros_env, "/probe/spikes", "--field", "header.stamp", "--flow-style") \
+            == "{sec: 3, nanosec: 5}\n---\n"
+        assert echo_once(ros_env, "/probe/spikes", "--field", "spikes", "--csv") == "0,1,0\n"
+        assert echo_once(ros_env, "/probe/spikes", "--field", "tick") == "7\n---\n"
+        assert echo_once(ros_env, "/probe/empty") == "{}\n---\n"
+        assert echo_once(ros_env, "/probe/empty", "--csv") == "\n"
+    finally:
+        stop(probes)
+
+
+@pytest.mark.ros
+def test_topics_counts_every_endpoint_of_several_participants(ros_env):
+    """Three processes (participants) of two nodes each: the counts are complete in one call
+    (the tool waits until discovery is complete and settled), and its own endpoints (it has a
+    /parameter_events publisher) are not counted."""
+    probes = [start_probe(ros_env, "/probe/counted", "std_msgs/msg/Empty", "{}", nodes=2)
+              for _ in range(3)]
+    try:
+        listed = tool(ros_env, "clnn_ros.topics", "--count")
+        assert listed.returncode == 0 and listed.stderr == "", listed.stderr
+        assert listed.stdout.splitlines() == [
+            "/parameter_events [rcl_interfaces/msg/ParameterEvent]  publishers 6, subscribers 0",
+            "/probe/counted [std_msgs/msg/Empty]  publishers 6, subscribers 6",
+            "/rosout [rcl_interfaces/msg/Log]  publishers 6, subscribers 0"]
+    finally:
+        stop(probes)

@@ -1,0 +1,188 @@
+"""ros_package/, the ament_python package clnn_ros for a ROS 2 workspace: its manifest, its setup
+metadata and executables, the launch plan (what graph.launch.py starts, against run_all), and,
+where colcon is installed, a `colcon build` of it and what its install tree holds.
+
+`ros2 launch` itself is not on PyPI: the launch file is only compiled here."""
+
+from __future__ import annotations
+
+import ast
+import importlib
+import os
+import shutil
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+import yaml
+from catkin_pkg.package import parse_package
+
+from clnn_ros import launch_plan, run_all
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE_DIR = ROOT / "ros_package"
+# The ROS packages that are Python modules here but have no share/<name>/package.xml in the venv.
+LAUNCH_PACKAGES = {"launch", "launch_ros"}
+
+
+def setup_distribution():
+    """setup.py's metadata, read as colcon reads it (run_setup up to the configuration)."""
+    import setuptools  # noqa: F401  (first: distutils is then setuptools' own, as for colcon)
+    from distutils.core import run_setup
+    cwd = os.getcwd()
+    os.chdir(PACKAGE_DIR)
+    try:
+        return run_setup("setup.py", script_args=["--dry-run"], stop_after="config")
+    finally:
+        os.chdir(cwd)
+
+
+def imported_modules(paths) -> set[str]:
+    found = set()
+    for path in paths:
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                found |= {alias.name.split(".")[0] for alias in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.level == 0:
+                found.add(node.module.split(".")[0])
+    return found
+
+
+def test_the_manifest_names_the_package_its_version_and_every_ros_package_it_imports():
+    package = parse_package(PACKAGE_DIR / "package.xml")
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert (package.name, package.package_format) == ("clnn_ros", 3)
+    assert package.version == project["version"]
+    assert [e.content for e in package.exports if e.tagname == "build_type"] == ["ament_python"]
+    sources = [*(ROOT / "clnn_ros").rglob("*.py"), PACKAGE_DIR / "launch" / "graph.launch.py"]
+    ros_packages = {name for name in imported_modules(sources)
+                    if (Path(sys.prefix) / "share" / name / "package.xml").is_file()
+                    or name in LAUNCH_PACKAGES}
+    assert {"rclpy", "clnn_ros_msgs", "std_srvs", "launch_ros"} <= ros_packages
+    assert ros_packages <= {d.name for d in package.exec_depends}
+
+
+def test_setup_installs_the_manifest_marker_launch_file_and_an_executable_per_node():
+    distribution = setup_distribution()
+    assert distribution.get_name() == "clnn_ros"
+    assert distribution.get_version() == parse_package(PACKAGE_DIR / "package.xml").version
+    assert dict(distribution.data_files) == {
+        "share/ament_index/resource_index/packages": ["resource/clnn_ros"],
+        "share/clnn_ros": ["package.xml"], "share/clnn_ros/launch": ["launch/graph.launch.py"]}
+    for _, sources in distribution.data_files:
+        assert all((PACKAGE_DIR / source).is_file() for source in sources)
+    assert {"clnn_ros", "clnn_ros.nodes", "clnn_ros.core"} <= set(distribution.packages)
+    scripts = dict(line.replace(" ", "").split("=")
+                   for line in distribution.entry_points["console_scripts"])
+    for name, target in scripts.items():
+        module, function = target.split(":")
+        assert callable(getattr(importlib.import_module(module), function)), name
+    # every node module with a main, and every command pip installs (pyproject's scripts)
+    nodes = {path.stem for path in (ROOT / "clnn_ros" / "nodes").glob("*.py")
+             if "\ndef main(" in path.read_text()}
+    assert {scripts[node] for node in nodes} == {f"clnn_ros.nodes.{node}:main" for node in nodes}
+    commands = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    assert set(commands.values()) <= set(scripts.values())
+    assert scripts.keys() >= {"environment", "encoder", "agent", "reward", "trial_manager",
+                              "recorder", "run_all", "echo", "topics"}
+
+
+def test_the_launch_file_compiles():
+    path = PACKAGE_DIR / "launch" / "graph.launch.py"
+    compile(path.read_text(), str(path), "exec")
+
+
+def params(path: Path) -> dict:
+    return yaml.safe_load(path.read_text())["/**"]["ros__parameters"]
+
+
+def test_the_launch_plan_is_run_alls_graph_with_its_parameters(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # the default bag is bags/run_<UTC time>.mcap under it
+    nodes = launch_plan.plan({}, tmp_path)
+    assert [n.executable for n in nodes] == ["recorder", *run_all.NODES]
+    assert all(n.namespace == "/" and n.remappings == () for n in nodes)
+    graph = params(nodes[1].params_file)
+    assert graph == {**run_all.build_parameters(run_all.parse_args([])), "out_dir": "",
+                     "extra_nodes": "recorder"}
+    recorder = params(nodes[0].params_file)
+    assert Path(recorder.pop("bag_path")).parent == tmp_path / "bags"
+    assert recorder == {k: v for k, v in graph.items() if k != "extra_nodes"}
+    assert all(n.params_file == nodes[1].params_file for n in nodes[1:])
+
+
+def test_launch_arguments_are_run_alls_options(tmp_path):
+    out = tmp_path / "out"
+    params_file = tmp_path / "p.yaml"
+    params_file.write_text("/**:\n  ros__parameters:\n    sigma: 4\n")
+    arguments = {"seed": "3", "trials": "7", "nsv": "2", "params_file": str(params_file),
+                 "namespace": "robot1", "env": "gymnasium", "out": str(out), "record": "false"}
+    nodes = launch_plan.plan(arguments, tmp_path)
+    assert [n.executable for n in nodes] == ["gymnasium_env", *run_all.NODES[1:]]
+    expected = run_all.build_parameters(run_all.parse_args(
+        ["--seed", "3", "--trials", "7", "--nsv", "2", "--params-file", str(params_file)]))
+    assert params(nodes[0].params_file) == {**expected, "out_dir": str(out.resolve())}
+    assert expected["sigma"] == 4
+    for node in nodes:  # the same command-line arguments as run_all gives its processes
+        assert ["--ros-args", "--params-file", str(node.params_file), "--log-level",
+                node.log_level, "-r", f"__ns:={node.namespace}",
+                *[f for rule in node.remappings for f in ("-r", ":=".join(rule))]] == \
+            run_all.ros_arguments(node.params_file, node.namespace)
+    external = launch_plan.plan({"env": "external", "record": "false"}, tmp_path)
+    assert [n.executable for n in external] == list(run_all.NODES[1:])
+    assert params(external[0].params_file)["external_nodes"] == "environment"
+
+
+def test_bad_launch_arguments_end_with_run_alls_error_line(tmp_path, capsys):
+    with pytest.raises(SystemExit) as stopped:
+        launch_plan.plan({"nsv": "two"}, tmp_path)
+    assert stopped.value.code == 2
+    assert capsys.readouterr().err == "run_all: error: argument --nsv: invalid int value: 'two'\n"
+
+
+def colcon() -> str | None:
+    """colcon (colcon-common-extensions) from CLNN_COLCON or PATH: it is not in the project's venv
+    (its pytest plugins would load into every test run); e.g.
+    python3.11 -m venv /tmp/colcon && /tmp/colcon/bin/pip install colcon-common-extensions"""
+    return os.environ.get("CLNN_COLCON") or shutil.which("colcon")
+
+
+@pytest.mark.skipif(colcon() is None, reason="no colcon (set CLNN_COLCON=path/to/colcon)")
+def test_colcon_builds_the_package_into_an_install_tree(tmp_path):
+    source = tmp_path / "ws" / "src" / "clnn_ros"
+    shutil.copytree(ROOT, source, symlinks=True, ignore=shutil.ignore_patterns(
+        ".*", "__pycache__", "*.egg-info", "bags", "build", "install", "log"))
+    environment = {k: v for k, v in os.environ.items()  # colcon runs its own Python
+                   if k not in ("_ROS_WHEELS_BOOTSTRAP_COMPLETE", "LD_LIBRARY_PATH", "PYTHONPATH")}
+    workspace = tmp_path / "ws"
+    listed = subprocess.run([colcon(), "list"], cwd=workspace, env=environment,
+                            capture_output=True, text=True, timeout=300)
+    assert listed.returncode == 0, listed.stderr
+    assert sorted(line.split("\t")[::2] for line in listed.stdout.splitlines()) == [
+        ["clnn_ros", "(ros.ament_python)"], ["clnn_ros_msgs", "(ros.ament_cmake)"]]
+    # clnn_ros_msgs is built by scripts/setup.sh into the venv, the underlay here
+    built = subprocess.run([colcon(), "build", "--packages-ignore", "clnn_ros_msgs"],
+                           cwd=workspace, env=environment, capture_output=True, text=True,
+                           timeout=600)
+    assert built.returncode == 0, built.stdout + built.stderr
+    install = workspace / "install" / "clnn_ros"
+    for name in ("environment", "gymnasium_env", "encoder", "reward", "agent", "trial_manager",
+                 "recorder", "run_all", "echo", "topics", "analyze", "reproduce", "check_env",
+                 "save_checkpoint"):
+        assert (install / "lib" / "clnn_ros" / name).is_file(), name
+    assert (install / "share" / "clnn_ros" / "package.xml").read_text() == \
+        (PACKAGE_DIR / "package.xml").read_text()
+    assert (install / "share" / "clnn_ros" / "launch" / "graph.launch.py").is_file()
+    assert (install / "share" / "ament_index" / "resource_index" / "packages" / "clnn_ros").is_file()
+    site = next((install / "lib").glob("python3*/site-packages"))
+    assert (site / "clnn_ros" / "fastdds_profile.xml").is_file()
+    # the executables run the installed code (as `ros2 run` would, with this venv's ROS)
+    run_env = {**os.environ, "PYTHONPATH": str(site)}
+    agent = subprocess.run([sys.executable, str(install / "lib" / "clnn_ros" / "agent"), "x"],
+                           cwd=tmp_path, env=run_env, capture_output=True, text=True, timeout=120)
+    assert agent.returncode == 2 and agent.stderr.startswith(
+        "agent: error: unexpected arguments ['x']"), agent.stderr
+    where = subprocess.run([sys.executable, "-c", "import clnn_ros.echo; print(clnn_ros.echo.__file__)"],
+                           cwd=tmp_path, env=run_env, capture_output=True, text=True, timeout=120)
+    assert Path(where.stdout.strip()).is_relative_to(site), where.stderr
