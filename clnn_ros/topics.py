@@ -7,9 +7,9 @@ It listens (DDS discovery) on this ROS_DOMAIN_ID until what it has found is comp
 settled, prints, exits. Complete: every endpoint's node has announced itself and every node
 announced has endpoints (on a loaded machine a participant's endpoints can come seconds after
 its announcement, or before it). Settled: nothing changed for as long as discovery had taken
-until the last change (at least 1 s), so a slow machine is given proportionally longer. Its own
-endpoints are not counted. Exit status 0 (a warning line if it gave up after --wait); 130 on
-Ctrl-C.
+until the last change and at least 4 s (a participant announces itself every 3 s), so a slow
+machine is given proportionally longer. Its own endpoints are not counted. Exit status 0 (a
+warning line if it gave up after --wait); 130 on Ctrl-C.
 """
 
 from __future__ import annotations
@@ -22,7 +22,10 @@ from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before r
 
 from .cli import OneLineArgumentParser
 
-MIN_QUIET_S = 1.0
+# A participant announces itself every 3 s (Fast DDS's default announcement period); one that
+# missed this tool's first announcements is seen at its next one, so a quieter spell than that is
+# no proof that discovery is over (seen on a loaded machine: a third participant missed).
+MIN_QUIET_S = 4.0
 
 
 def is_hidden(name: str) -> bool:

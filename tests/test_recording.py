@@ -287,8 +287,8 @@ def child(process, module: str) -> int:
 
 
 def listed_topics(env, wanted: set[str], *args) -> set[str]:
-    """clnn_ros.topics' lines once they include `wanted`: it lists what discovery has found
-    after a quiet second, and on a loaded machine a participant's endpoints can come later."""
+    """clnn_ros.topics' lines once they include `wanted`: it lists what discovery has found once
+    it settled, and a run's participants may still be starting."""
     deadline, lines = time.monotonic() + 60, set()
     while not wanted <= lines and time.monotonic() < deadline:
         listed = tool(env, "clnn_ros.topics", *args)
