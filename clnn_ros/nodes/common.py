@@ -223,7 +223,6 @@ def make_executor(context=None):
     return EventsExecutor(context=context)
 
 
-
 class WithMessageInfo:
     """A subscription callback `function(message, message_info)` under either executor: rclpy
     passes the message info to a callback of two parameters, its SingleThreadedExecutor as two
@@ -239,6 +238,7 @@ class WithMessageInfo:
     def __call__(self, *arguments) -> None:
         message, info = arguments if len(arguments) == 2 else arguments[0]
         self.function(message, info)
+
 
 def catch_signals() -> list[int]:
     """Record SIGINT and SIGTERM instead of raising: the spin loop then ends between two
