@@ -60,6 +60,9 @@ READY_QOS = qos_profile(qos.READY)
 # keeps the graph at most RECORDER_WINDOW ticks ahead of it, far less than the publishers'
 # history, so a slow recorder slows the graph down instead of losing messages.
 RECORDER_WINDOW = 500
+# Seen once in a suite beside CPU hogs: the trial manager never took the recorder's one
+# announcement (TRANSIENT_LOCAL, reliable; a reader that joined later got it) and waited for it.
+READY_REPEAT_S = 1.0
 ACK_WAIT_S = 2.0  # a node's last messages reach the recorder before the node exits (or this)
 REFUSAL_LOG_S = 1.0  # at most one refusal line per topic per second (a flood fills no disk)
 # run_all gives each child a pipe on stdin that it never writes to: end of file means run_all
@@ -76,7 +79,8 @@ def steady_clock() -> Clock:
 class GraphNode(Node):
     """A node of the graph. It reads the shared parameters into a validated core Params,
     announces on READY once each of its publishers has matched the subscribers the graph gives
-    it, and stops when the trial manager announces the end of the episode."""
+    it (again every READY_REPEAT_S until the graph runs), and stops when the trial manager
+    announces the end of the episode."""
 
     listens_to_trial_events = True  # every node but their publisher, the trial manager
     driven_by_clock = True  # its time is the graph's sim time (use_sim_time)
@@ -104,6 +108,7 @@ class GraphNode(Node):
             setattr(self, attribute, publisher)
             self._expected.append((publisher, subscribers + len(self.extra_nodes)))
         self._ready_publisher = self.create_publisher(String, READY, READY_QOS)
+        self._announced_at = -READY_REPEAT_S
         self._ready_timer = self.create_timer(0.02, self._announce_when_matched,
                                               clock=steady_clock())
         if self.listens_to_trial_events:
@@ -114,9 +119,15 @@ class GraphNode(Node):
         return all(p.get_subscription_count() >= n for p, n in self._expected)
 
     def _announce_when_matched(self) -> None:
-        if self.publishers_matched():
-            self._ready_publisher.publish(String(data=self.get_name()))
+        """Announce once the publishers have matched, and again every READY_REPEAT_S until the
+        graph runs: a trial manager that missed the one announcement would wait forever."""
+        if self.current_tick() > 0:
             self._ready_timer.cancel()
+            return
+        now = time.monotonic()
+        if now - self._announced_at >= READY_REPEAT_S and self.publishers_matched():
+            self._ready_publisher.publish(String(data=self.get_name()))
+            self._announced_at = now
 
     def subscribe(self, msg_type, topic: str, callback: Callable) -> None:
         """Subscribe to an input of the graph. A message goes to `callback` only if it keeps the

@@ -3,20 +3,20 @@
 
     python -m clnn_ros.nodes.recorder --ros-args -p bag_path:=NAME [--params-file P]
 
-It subscribes raw (the CDR bytes, never decoded) to clock, trial/event, cartpole/state,
-rln/spikes, rln/reward, rln/action and rln/weights (in its namespace) with a deep reader queue,
-and announces "recorder" on _graph/ready once each subscription sees its publisher; run_all
-makes the trial manager wait for it (run setting extra_nodes), so the first tick is recorded.
-Every 20 ms it publishes on _recorder/progress the last tick it holds on every per-tick topic;
-the trial manager keeps the graph within RECORDER_WINDOW ticks of it, so a slow recorder loses
-nothing. Each message keeps its receive time (log_time) and its publisher's source timestamp
-(publish_time), as Jazzy's recorder does. The bag is finished (rosbag2 metadata, summary,
+It subscribes raw (the CDR bytes, never decoded) to clock, trial/event, cartpole/state, rln/spikes,
+rln/reward, rln/action and rln/weights (in its namespace) with a deep reader queue, and announces
+"recorder" on _graph/ready once each subscription sees its publisher (again every second until the
+first clock); run_all makes the trial manager wait for it (run setting extra_nodes), so the first
+tick is recorded. Every 20 ms it publishes on _recorder/progress the last tick it holds on every
+per-tick topic; the trial manager keeps the graph within RECORDER_WINDOW ticks of it, so a slow
+recorder loses nothing. Each message keeps its receive time (log_time) and its publisher's source
+timestamp (publish_time), as Jazzy's recorder does. The bag is finished (rosbag2 metadata, summary,
 index, metadata.yaml) on EPISODE_END (a normal end, or a stall the trial manager detected), on
 Ctrl-C, on SIGTERM and when run_all goes away. A chunk goes to the file half a second after its
-first message (bag.CHUNK_SECONDS), so a SIGKILL loses at most that; `python -m clnn_ros.bag
-repair` then makes a finished copy. A bag that holds no message is removed. The run's
-parameters are stored in the bag's `clnn_ros` metadata record. Exit status 0, 130/143 after a
-signal, 2 for bad parameters, 1 if the bag cannot be written (a full disk: one line).
+first message (bag.CHUNK_SECONDS), so a SIGKILL loses at most that; `python -m clnn_ros.bag repair`
+then makes a finished copy. A bag that holds no message is removed. The run's parameters are stored
+in the bag's `clnn_ros` metadata record. Exit status 0, 130/143 after a signal, 2 for bad
+parameters, 1 if the bag cannot be written (a full disk: one line).
 """
 
 from __future__ import annotations
@@ -42,8 +42,8 @@ from ..core.params import ParamError, Params
 from ..files import describe_write_error
 from ..names import (CLOCK, PER_TICK, READY, RECORDED, RECORDER, TOPIC_TYPES,
                      TRIAL_EVENT)
-from .common import (PROGRESS_QOS, READY_QOS, WithMessageInfo, qos_profile, ros_session,
-                     spin_until_finished, steady_clock)
+from .common import (PROGRESS_QOS, READY_QOS, READY_REPEAT_S, WithMessageInfo, qos_profile,
+                     ros_session, spin_until_finished, steady_clock)
 from .parameters import declare_parameters
 
 RECORD_QOS = qos_profile(qos.RECORD)
@@ -85,6 +85,7 @@ class RecorderNode(Node):
         self.episode_end_at = None
         self.last_message_at = time.monotonic()
         self._ready_publisher = self.create_publisher(String, READY, READY_QOS)
+        self._announced_at = -READY_REPEAT_S
         self._progress_publisher = self.create_publisher(UInt64, RECORDED, PROGRESS_QOS)
         self._progress = UInt64()
         self._timer = self.create_timer(0.02, self._poll, clock=steady_clock())
@@ -143,7 +144,10 @@ class RecorderNode(Node):
                 self.failure = describe_write_error(error, self.path)
                 self.finish(1)
                 return
-        if self._ready_publisher is not None:
+        if CLOCK in self.last_tick:  # the graph runs: no more announcements (see GraphNode)
+            self._ready_publisher = None
+        if self._ready_publisher is not None and \
+                time.monotonic() - self._announced_at >= READY_REPEAT_S:
             if all(s.get_publisher_count() >= 1 for s in self.subscriptions_by_topic.values()):
                 try:
                     for topic in TOPIC_TYPES:
@@ -153,7 +157,7 @@ class RecorderNode(Node):
                     self.finish(1)
                     return
                 self._ready_publisher.publish(String(data=RECORDER))
-                self._ready_publisher = None
+                self._announced_at = time.monotonic()
         if len(self.last_tick) == len(PER_TICK):  # sent each time: a lost one is replaced
             self._progress.data = min(self.last_tick.values()) // self.tau_ns
             self._progress_publisher.publish(self._progress)
