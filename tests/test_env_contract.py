@@ -9,10 +9,12 @@ from __future__ import annotations
 import csv
 import os
 import queue
+import signal
 import subprocess
 import sys
 import threading
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -296,3 +298,43 @@ def test_external_environment_that_never_comes(ros_env, tmp_path):
     assert len(errors) == 1, stderr
     assert "environment" in errors[0] and "/nobody" in errors[0] and \
         f"{stall_timeout:g} s" in errors[0], errors[0]
+
+
+READY_LISTENER = """
+import rclpy
+from std_msgs.msg import String
+from clnn_ros.nodes.common import READY_QOS
+rclpy.init()
+node = rclpy.create_node("_ready_listener")
+node.create_subscription(String, "/waiting/_graph/ready", lambda m: print(m.data, flush=True),
+                         READY_QOS)
+rclpy.spin(node)
+"""
+
+
+def test_nodes_announce_again_while_the_graph_waits(ros_env, tmp_path):
+    """While the graph waits (here for an environment node nobody starts), a node that is ready
+    announces it again and again: a trial manager that missed the one announcement (seen once
+    beside CPU hogs) would otherwise wait for good. Ready here: the encoder and the reward node
+    (every subscriber of their outputs is up); the others wait for the environment."""
+    run = start_external_run(ros_env, ["--stall-timeout", "600", "--trials", "2",
+                                       "--namespace", "waiting", "--out", str(tmp_path / "out")],
+                             tmp_path / "run_all.err")
+    listener = None
+    try:
+        Lines(run.stdout).wait_for(WAITING, timeout=120)
+        listener = subprocess.Popen([PY, "-c", READY_LISTENER], cwd=ROOT, env=ros_env,
+                                    stdout=subprocess.PIPE, text=True)
+        heard, lines = Counter(), Lines(listener.stdout)
+        while heard["encoder"] < 3 or heard["reward"] < 3:
+            heard[lines.wait_for("", timeout=120)] += 1
+        assert not set(heard) - {"encoder", "reward"}, heard
+    finally:
+        if listener is not None:
+            listener.kill()
+            listener.wait(timeout=30)
+        run.send_signal(signal.SIGINT)
+        try:
+            run.wait(timeout=60)
+        finally:
+            end(run)
