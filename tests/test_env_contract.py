@@ -27,7 +27,7 @@ from clnn_ros.core.episode import run_episode
 from clnn_ros.core.gym_physics import GymCartPole, gym_matched_params
 from clnn_ros.core.params import ParamError, Params, params_from_strings
 
-from conftest import free_domain_id
+from conftest import HANG_S, free_domain_id
 
 pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 ROOT = Path(__file__).resolve().parents[1]
@@ -244,7 +244,7 @@ def test_external_environment_started_separately(ros_env, tmp_path, namespace):
     try:
         stdout = Lines(run.stdout)
         try:
-            waiting = stdout.wait_for(WAITING, timeout=60)
+            waiting = stdout.wait_for(WAITING, timeout=HANG_S)
         except AssertionError as error:
             raise AssertionError(f"{error}\n{(tmp_path / 'run_all.err').read_text()}") from None
         assert f"in namespace /{namespace or ''} " in waiting, waiting
@@ -261,7 +261,7 @@ def test_external_environment_started_separately(ros_env, tmp_path, namespace):
         assert status == 0, f"{stdout.text()}\n{stderr}"
         assert stdout.wait_for("run_all: completed:", timeout=10), stdout.text()
         # the environment ends by itself on EPISODE_END
-        assert environment.wait(timeout=60) == 0, environment.stderr.read()
+        assert environment.wait(timeout=HANG_S) == 0, environment.stderr.read()
     finally:
         end(run, environment)
     core = run_episode(seed, Params(trials=trials, max_steps=max_steps))
@@ -280,7 +280,7 @@ def test_external_environment_that_never_comes(ros_env, tmp_path):
                                        "--trials", "2", "--max-steps", "100",
                                        "--namespace", "nobody"], tmp_path / "run_all.err")
     try:
-        Lines(run.stdout).wait_for(WAITING, timeout=60)
+        Lines(run.stdout).wait_for(WAITING, timeout=HANG_S)
         waiting_at = time.monotonic()
         try:
             status = run.wait(timeout=stall_timeout + margin)

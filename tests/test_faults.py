@@ -24,7 +24,7 @@ from clnn_ros.rosenv import fast_dds_shm_files, shm_files_in_use
 from test_graph import processes_with, wait_for_line
 from test_recording import assert_every_tick, child, raw_messages, start_run
 
-from conftest import free_domain_id, ros_environment
+from conftest import HANG_S, free_domain_id, ros_environment
 
 pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 DOMAIN_ID = free_domain_id()
@@ -112,7 +112,7 @@ def test_silent_node_is_named_after_the_stall_timeout(ros_env, tmp_path):
     """Alive but publishing nothing: the stall watchdog names it."""
     process = start_run(ros_env, tmp_path, "--stall-timeout", "1",
                         "--env-node", f"python {BROKEN} mute")
-    _, stderr = process.communicate(timeout=60)
+    _, stderr = process.communicate(timeout=HANG_S)
     assert process.returncode == 1
     assert error_lines(stderr) == ["run_all: error: stall: node 'environment' went silent at "
                                    "tick 50 (no progress for 1 s)"]
@@ -125,7 +125,7 @@ def test_a_wrong_tick_is_blamed_on_its_sender(ros_env, tmp_path):
     the environment (not the encoder downstream) is named."""
     process = start_run(ros_env, tmp_path, "--stall-timeout", "1",
                         "--env-node", f"python {BROKEN} wrong_tick")
-    _, stderr = process.communicate(timeout=60)
+    _, stderr = process.communicate(timeout=HANG_S)
     assert process.returncode == 1
     assert error_lines(stderr) == [
         "run_all: error: stall: node 'environment' went silent at tick 2 (no progress for 1 s; "
@@ -140,7 +140,7 @@ def test_a_node_that_fails_at_start_ends_the_run_at_once(ros_env, tmp_path, comm
     run = subprocess.run(
         [sys.executable, "-m", "clnn_ros.run_all", "--out", str(tmp_path), "--env-node",
          command], env={**ros_env, "CLNN_TEST_RUN": str(tmp_path)}, capture_output=True,
-        text=True, timeout=60)
+        text=True, timeout=HANG_S)
     assert run.returncode == 1
     lines = error_lines(run.stderr)
     assert len(lines) == 1 and lines[0].startswith("run_all: error: ") and \
@@ -187,7 +187,7 @@ def test_a_second_graph_on_the_same_domain_and_namespace_is_refused(ros_env, tmp
         second = subprocess.run(
             [sys.executable, "-m", "clnn_ros.run_all", "--out", str(tmp_path / "second")],
             env={**ros_env, "CLNN_TEST_RUN": str(tmp_path / "second")}, capture_output=True,
-            text=True, timeout=60)
+            text=True, timeout=HANG_S)
         assert second.returncode == 1
         lines = error_lines(second.stderr)
         assert len(lines) == 1 and lines[0].startswith(

@@ -22,7 +22,7 @@ from clnn_ros.core.params import Params
 from test_graph import processes_with, read_steps, wait_for_line
 from test_faults import error_lines
 
-from conftest import free_domain_id, ros_environment
+from conftest import HANG_S, free_domain_id, ros_environment
 
 pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 DOMAIN_ID = free_domain_id()
@@ -112,7 +112,7 @@ def test_two_graphs_in_two_namespaces_on_one_domain(ros_env, tmp_path):
         topics |= {line.split()[0] for line in listed.splitlines()}
     for name, (out, seed, process) in runs.items():
         process.send_signal(signal.SIGINT)
-        _, stderr = process.communicate(timeout=60)
+        _, stderr = process.communicate(timeout=HANG_S)
         assert process.returncode in (0, 130), stderr[-3000:]
         steps = read_steps(out)
         assert len(steps) >= 2
