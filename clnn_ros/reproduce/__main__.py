@@ -3,6 +3,7 @@ generated report docs/REPRODUCTION.md.
 
     python -m clnn_ros.reproduce calibrate [--out DIR]
     python -m clnn_ros.reproduce learn --nsv 1 --seeds 0-31 --trials 512 --out DIR [--option key=value]
+    python -m clnn_ros.reproduce learn --state-vars pole_angle,cart_position --seeds 0-3 --out DIR
     python -m clnn_ros.reproduce figures [--out DIR] [--seeds 0-31]
     python -m clnn_ros.reproduce all [--out docs]
 
@@ -20,7 +21,7 @@ import time
 from pathlib import Path
 
 from ..cli import OneLineArgumentParser
-from ..core.params import ParamError, Params, params_from_strings
+from ..core.params import STATE_NAMES, ParamError, Params, params_from_strings
 from .calibration import calibrate, print_calibration, write_calibration
 from .common import DEFAULT_SEEDS, LITERAL_EDGE, TRIALS, parse_seeds, stuck
 from .figures import figures_markdown, make_figures
@@ -30,12 +31,17 @@ from .open_choices import OPTION_SEEDS, open_choices, open_choices_markdown, wri
 from .physics_modes import physics_markdown, physics_runs, write_physics
 from .report import claims_markdown, data_files_markdown, header_markdown, write_report
 
-OWN_FLAGS = {"nsv": "--nsv", "trials": "--trials", "velocity_edge": "--velocity-edge",
+OWN_FLAGS = {"nsv": "--nsv", "state_vars": "--state-vars", "trials": "--trials",
+             "velocity_edge": "--velocity-edge",
              "physics": "--physics"}  # Params fields `learn` sets with a flag, not --option
 
 
 def learn_params(args) -> Params:
-    values = {"nsv": str(args.nsv), "trials": str(args.trials)}
+    values = {"trials": str(args.trials)}
+    if args.nsv is not None:
+        values["nsv"] = str(args.nsv)
+    if args.state_vars is not None:
+        values["state_vars"] = args.state_vars
     if args.velocity_edge is not None:
         values["velocity_edge"] = args.velocity_edge
     if args.physics is not None:
@@ -121,8 +127,12 @@ def build_parser() -> argparse.ArgumentParser:
     c.set_defaults(func=cmd_calibrate)
 
     ln = sub.add_parser("learn", help="learning episodes with the batch engine, CSV + NPZ out")
-    ln.add_argument("--nsv", type=int, choices=(1, 2), required=True,
-                    help="state variables: 1 (angle) or 2 (angle and cart velocity)")
+    ln.add_argument("--nsv", type=int, choices=(1, 2, 3, 4),
+                    help="state variables: 1 (angle, the default), 2 (and cart velocity), 3 (and "
+                         "cart position), 4 (and pole angular velocity)")
+    ln.add_argument("--state-vars", metavar="NAMES",
+                    help="the encoded state variables instead, in input order, of: "
+                         + ", ".join(STATE_NAMES))
     ln.add_argument("--seeds", default=DEFAULT_SEEDS, help="seeds, e.g. 0-31, 0,3,5 or 0-3,7")
     ln.add_argument("--trials", type=int, default=TRIALS, help="trials per episode")
     ln.add_argument("--velocity-edge", type=str, default=None,
