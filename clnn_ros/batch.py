@@ -26,7 +26,7 @@ from .core.encoder import Encoder, encode_active
 from .core.episode import angle_grid, seed_setup
 from .core.params import Params
 from .core.physics import CONTINUE, cartpole_step, physics_constants, trial_start_state
-from .core.rln import (NEVER, NONE, TIE_RANDOM, Rule, infer, outcome, response_space,
+from .core.rln import (NEVER, NONE, TIE_RANDOM, Rule, explore, infer, outcome, response_space,
                        restart_counters, tag_action_path, trial_start_count, update)
 
 
@@ -81,6 +81,7 @@ def _run_trials(weights, angles, constants, force, components, edges, offsets, m
             if decisions[pattern, 0] == STALE or not use_cache:
                 decisions[pattern] = infer(weights, active, rule, rng, responses)
             neuron, s0, s1 = decisions[pattern, 0], decisions[pattern, 1], decisions[pattern, 2]
+            neuron = explore(neuron, rule, rng)
             tag_action_path(punish_tagged_at, reward_tagged_at, eligible, neuron, (s0, s1),
                             active, now, rule)
             x, x_dot, theta, theta_dot, status = cartpole_step(

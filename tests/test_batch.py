@@ -39,6 +39,9 @@ CASES = {
     "3 state variables": (dict(nsv=3), True),
     "4 state variables": (dict(nsv=4, segments=12), True),
     "angle and position": (dict(state_vars="cart_position,pole_angle"), True),
+    "exploring": (dict(nsv=1, explore=0.002), True),
+    "exploring, random ties": (dict(nsv=2, velocity_edge=0.5, explore=0.01, tie_break="random"),
+                               True),
 }
 
 OPTIONS = {"tie_break": TIE_BREAKS, "tagging": TAGGING, "e_flag": E_FLAGS,

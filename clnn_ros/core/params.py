@@ -91,6 +91,9 @@ class Params:
     # is released with F = 0 for one step first (not a successful step: the network did not act)
     punish_timing: str = "before_decay"  # the path's head gets c- = omega, or omega - 1 ("after_decay")
     inference: str = "ceiled"  # segment response: sum of ceil(w) ("ceiled") or of w ("exact")
+    # A way out of local optima (not in the paper): the network WTA's winner is overruled with
+    # this probability and the other neuron acts (its winning segment is the path's).
+    explore: float = 0.0
 
     # Derived values; not set by users.
     n_inputs: int = field(init=False)
@@ -139,7 +142,7 @@ class Params:
         positive = ("w_max", "cart_mass", "pole_mass", "pole_length", "gravity", "tau",
                     "angle_limit_deg", "track_limit_m", "velocity_edge")
         non_negative = ("rho_plus", "rho_minus", "punish", "w_base", "w_range", "force",
-                        "angle_span_deg")
+                        "angle_span_deg", "explore")
         for name in positive + non_negative:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
@@ -148,6 +151,8 @@ class Params:
                 raise ParamError(f"{name} must be > 0, got {value!r}")
             if value < 0:
                 raise ParamError(f"{name} must be >= 0, got {value!r}")
+        if not 0 <= self.explore <= 1:
+            raise ParamError(f"explore must be a probability from 0 to 1, got {self.explore!r}")
         if self.w_base + self.w_range > self.w_max:
             raise ParamError(f"w_base + w_range ({self.w_base + self.w_range:g}) must not exceed "
                              f"w_max ({self.w_max:g})")

@@ -73,6 +73,7 @@ class Rule(NamedTuple):
     ceiled: bool  # inference="ceiled"
     punish_lag: int  # punish_timing: 0 "before_decay", 1 "after_decay" (ticks of decay first)
     decay_per_trial: bool  # decay_counters="per_trial"
+    explore: float  # probability that the network WTA's winner is overruled
 
     @classmethod
     def from_params(cls, p: Params) -> "Rule":
@@ -80,7 +81,8 @@ class Rule(NamedTuple):
                    float(p.punish), float(p.w_max), TIE_BREAKS.index(p.tie_break),
                    p.tagging == "both_neurons", p.e_flag == "latched",
                    p.success_counter == "per_trial", p.inference == "ceiled",
-                   int(p.punish_timing == "after_decay"), p.decay_counters == "per_trial")
+                   int(p.punish_timing == "after_decay"), p.decay_counters == "per_trial",
+                   float(p.explore))
 
 
 # ---- inference (section 2.2) -------------------------------------------------------------------
@@ -148,6 +150,15 @@ def infer(weights, active, rule, random_state, responses):
     ceiled[0], exact[0] = segment_response(weights, 0, s0, active, rule.ceiled)
     ceiled[1], exact[1] = segment_response(weights, 1, s1, active, rule.ceiled)
     return wta(ceiled, exact, 2, rule.tie_break, random_state), s0, s1
+
+
+@tick_kernel
+def explore(neuron, rule, random_state):
+    """The neuron that acts: the network WTA's winner, or with probability rule.explore the
+    other one (a draw on every tick only when exploring)."""
+    if rule.explore > 0.0 and next_uniform(random_state) < rule.explore:
+        return 1 - neuron
+    return neuron
 
 
 # ---- decay counters (Figures 5 and 6) ---------------------------------------------------------
@@ -374,6 +385,8 @@ class RLNAgent:
         its winning segment)."""
         spikes = np.asarray(spikes, dtype=np.uint8)
         neuron, segments = self.infer(spikes)
+        with np.errstate(over="ignore"):  # the random stream wraps around by design
+            neuron = explore(neuron, self.rule, self.random_state)
         self.last_spikes = spikes
         tag_action_path(self.punish_tagged_at, self.reward_tagged_at, self.eligible, neuron,
                         segments, np.flatnonzero(spikes), self.tick, self.rule)

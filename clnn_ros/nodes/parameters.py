@@ -71,6 +71,8 @@ DESCRIPTIONS = {
     "punish_timing": ("the punished path's head gets omega (before the decay) or omega - 1",
                       PUNISH_TIMING),
     "inference": ("segment response: sum of ceil(w) or of w", INFERENCE),
+    "explore": ("probability that the network WTA's winner is overruled and the other neuron "
+                "acts (a way out of local optima; the paper: 0)", (0.0, 1.0)),
     "seed": ("the episode's seed: initial weights, initial angles", (0, 2**32 - 1)),
     "stall_timeout_s": ("seconds without progress before the graph is declared stalled",
                         POSITIVE),
