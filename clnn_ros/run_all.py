@@ -462,9 +462,14 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
             if not failed and not interrupted and recorder.returncode not in (None, 0):
                 report_failure(recorder)  # it failed first: the graph then stopped
                 failed = True
-            forced = stop_recorder(supervisor, episode_ended=status in (0, 1) and not failed)
+            episode_ended = status in (0, 1) and not failed
+            forced = stop_recorder(supervisor, episode_ended)
+            # Told to stop while still starting (before its handler was set), it dies of the
+            # SIGINT: as told, nothing recorded.
+            stopped_as_told = (0, 128 + signal.SIGINT) + \
+                (() if episode_ended else (-signal.SIGINT,))
             if not failed and not interrupted and not forced and \
-                    recorder.returncode not in (0, 128 + signal.SIGINT):
+                    recorder.returncode not in stopped_as_told:
                 report_failure(recorder)
                 failed = True
         summary = fresh_summary(out, began)
