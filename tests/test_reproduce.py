@@ -111,3 +111,38 @@ def test_calibrate_b_is_32_in_paper_mode(tmp_path, capsys):
     assert {(r["force"], r["steps"], r["end_reason"]) for r in paper} == {
         ("+F", "32", "cart_position"), ("-F", "32", "cart_position")}
     assert "paper/semi_implicit" in capsys.readouterr().out
+
+
+def test_integration_slip_reading_gives_29_steps():
+    """The other reading of the units slip (the cart sees the true theta_acc) misses (b) = 32."""
+    p = Params(physics="integration_slip")
+    assert constant_force_trial(p, +p.force) == (29, FAIL_POSITION)
+
+
+def test_sweep_writes_a_csv_per_configuration_and_a_summary(tmp_path, capsys):
+    assert main(["sweep", "--param", "sigma=128,256", "--param", "omega=64,256", "--nsv", "1",
+                 "--seeds", "0-2", "--trials", "6", "--out", str(tmp_path)]) == 0
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert names == ["sweep.png", "sweep_sigma=128_omega=256.csv", "sweep_sigma=128_omega=64.csv",
+                     "sweep_sigma=256_omega=256.csv", "sweep_sigma=256_omega=64.csv",
+                     "sweep_summary.csv", "sweep_summary.md"]
+    _, rows = _read_csv(tmp_path / "sweep_summary.csv")
+    for row in rows:  # each configuration is the batch engine's run of those values
+        p = Params(trials=6, sigma=int(row["sigma"]), omega=int(row["omega"]))
+        assert float(row["mean_steps"]) == round(float(run_batch([0, 1, 2], p).steps.mean()), 2)
+    _, trials = _read_csv(tmp_path / "sweep_sigma=128_omega=64.csv")
+    assert len(trials) == 3 * 6
+    assert "| sigma | omega | mean steps |" in (tmp_path / "sweep_summary.md").read_text()
+
+
+@pytest.mark.parametrize("bad, message", [
+    (["--param", "sigma"], "--param expects NAME=V1,V2"),
+    (["--param", "sigma=1,x"], "sigma must be an integer"),
+    (["--param", "trials=3"], "--param trials: not a model parameter"),
+    ([], "give at least one --param"),
+])
+def test_sweep_refuses_bad_grids_before_running(tmp_path, capsys, bad, message):
+    assert main(["sweep", *bad, "--seeds", "0", "--trials", "2", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]
+    assert not (tmp_path / "o").exists()

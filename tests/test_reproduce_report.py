@@ -27,6 +27,8 @@ from clnn_ros.reproduce.open_choices import (DEFAULTS, VELOCITY_EDGE, OptionRun,
 from clnn_ros.reproduce.physics_modes import ModeLearning, physics_markdown, write_physics
 from clnn_ros.reproduce.sensitivity import (FACTORS, SWEPT, Sensitivity, sensitivity_markdown,
                                           sensitivity_verdict)
+from clnn_ros.reproduce.state_variables import (EncodingRun, state_variables_markdown,
+                                              state_variables_verdict)
 from clnn_ros.reproduce.report import (claims_markdown, data_files_markdown, header_markdown,
                                        write_report)
 
@@ -214,3 +216,18 @@ def test_local_optima_table_and_verdict():
     assert "| 1 SV | 0 | 4,500 | 1 | 4,500 | 1 |" in md
     assert "explore = 0.001 leaves 0 seeds stuck (deterministic: 1)" in md
     assert "![local optima](figures/local_optima.png)" in md
+
+
+def test_state_variables_verdict_compares_with_the_angle_alone():
+    def run(names, mean, segments=None):
+        return EncodingRun(Params(state_vars=names, segments=segments),
+                           np.full((2, 70), float(mean)))
+    runs = [run("pole_angle", 5000), run("pole_angle,cart_position", 4500),
+            run("pole_angle,pole_angular_velocity", 1000),
+            run("pole_angle,cart_velocity,cart_position", 2000),
+            run("pole_angle,cart_velocity,cart_position", 2100, segments=9)]
+    verdict = state_variables_verdict(runs)
+    assert "Within 80 % of the angle alone (5,000): pole_angle, cart_position." in verdict
+    assert "does not explain the others" in verdict and "1.05" in verdict
+    md = state_variables_markdown(runs, BEST_EDGE)
+    assert "| pole_angle, cart_velocity, cart_position | 12 | 27 | 2,000 | 0 | 0% |" in md

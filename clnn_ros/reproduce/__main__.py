@@ -33,6 +33,8 @@ from .open_choices import OPTION_SEEDS, open_choices, open_choices_markdown, wri
 from .local_optima import (LOCAL_OPTIMA_SEEDS, local_optima, local_optima_markdown,
                            plot_local_optima, write_local_optima)
 from .physics_modes import physics_markdown, physics_runs, write_physics
+from .state_variables import (STATE_VAR_SEEDS, state_variable_runs, state_variables_markdown,
+                              write_state_variables)
 from .sensitivity import (SENSITIVITY_SEEDS, check_sweep_names, parse_grid,
                           sensitivity, sensitivity_markdown, sweep, sweep_summary_markdown,
                           write_sensitivity, write_sweep, write_sweep_report)
@@ -124,6 +126,8 @@ def cmd_all(args) -> None:
     optima = local_optima(optima_seeds, cal)
     files.append(write_local_optima(optima, data))
     optima_figure = plot_local_optima(optima, fig_dir / "local_optima.png")
+    encodings = state_variable_runs(parse_seeds(STATE_VAR_SEEDS), cal)
+    files.append(write_state_variables(encodings, data))
     figs = make_figures(cal, runs, fig_dir)
     gym = gymnasium_study(seeds, parse_seeds(SELECT_SEEDS))
     gym_files = write_gymnasium(gym, data)
@@ -139,6 +143,7 @@ def cmd_all(args) -> None:
         open_choices_markdown(options, cal.best_edge, len(option_seeds)),
         sensitivity_markdown(sens, len(sensitivity_seeds)),
         local_optima_markdown(optima, rel(optima_figure)),
+        state_variables_markdown(encodings, cal.best_edge),
         data_files_markdown(files, report.parent),
         gymnasium_markdown(gym, runs, physics, gym_files, rel)])
     print(f"wrote {path}, {len(figs.paths)} figures, {len(files)} data files "
