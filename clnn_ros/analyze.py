@@ -12,7 +12,8 @@ Writes into DIR (default: the bag's name without .mcap, plus _analysis):
                          and last 200 ticks tick by tick, with the action, reward and punishment
     weights.csv          every /rln/weights snapshot (one per trial end): trial,tick,neuron,segment,input,weight
     final_weights.npy    the last snapshot, shape (neurons, segments, inputs), as run_all saves it
-    weights.png          the last snapshot per neuron, on a colour scale from 0 to w_max
+    weights.png          the last snapshot per neuron, on a colour scale from 0 to w_max, and
+                         each weight's change since the first snapshot
     weights_history.png  every weight (neuron, segment, input) over the run, from every snapshot
     trial_N.gif          with --animate N: trial N's cart and pole, with each tick's spikes and
                          action (at most 300 frames)
@@ -48,20 +49,21 @@ from .message_fields import END, EPISODE_END, REACHED_MAX_STEPS, START, TRIALS_C
 from .names import (ACTION, PER_TICK, REWARD, RUN_SETTINGS, SPIKES, STATE, TOPIC_TYPES,
                     TRIAL_EVENT, WEIGHTS, absolute)
 
-# What each picture shows, for summary.md (trial_N.gif: ANIMATION).
+# What each picture shows, for summary.md ({trial}: the chosen trial; trial_N.gif: ANIMATION).
 PICTURES = {
     "learning_curve.png": "successful steps per trial, coloured by how each trial ended",
-    "traces.png": "the chosen trial against the tick: cart position and velocity, pole angle "
-                  "and angular velocity, action, reward and punishment, scaled to the motion",
-    "raster.png": "the chosen trial's spikes: an overview of the whole trial (share of ticks "
-                  "each input spiked) and its first and last ticks tick by tick, with the "
-                  "action and reward and punishment marked",
+    "traces.png": "trial {trial} against the tick: cart position and velocity, pole angle and "
+                  "angular velocity, action, reward and punishment, scaled to the motion",
+    "raster.png": "trial {trial}'s spikes tick by tick (a long trial's first and last 200 "
+                  "ticks, under an overview of the whole trial: the share of ticks each input "
+                  "spiked), with the action, rewards and punishments",
     "weights.png": "the last weight snapshot, per neuron: segments (from 0) x the bag's input "
-                   "intervals, on a colour scale from 0 to w_max",
+                   "intervals, on a colour scale from 0 to w_max; below, each weight's change "
+                   "since the first snapshot",
     "weights_history.png": "every weight over the run, one panel per neuron and segment, one "
                            "line per input, a point per snapshot (trial end)",
 }
-ANIMATION = "trial {}'s cart and pole, with each tick's spikes and action beside them"
+ANIMATION = "trial {trial}'s cart and pole, with each tick's spikes and action beside them"
 REINFORCEMENT = {"reward": 1, "punish": -1}  # Reward.kind; "none" is 0
 # The recorder's `environment` (run_all's --env, or its --env-node command): what ran, and
 # whose physics. Bags recorded before it was kept have none.
@@ -222,6 +224,8 @@ def trial_series(data, trial: int):
     from .analysis_figures import TrialSeries
     raw, decode, schemas = data["raw"], data["decode"], data["schemas"]
     start, end = trial_window(data["events"], trial)
+    if start is None:  # an END without its START (the default trial is taken from the ENDs)
+        return None
     if end is None:  # the run stopped inside this trial: up to its last state
         end = max(raw[STATE], default=start)
     ticks = [t for t in range(start, end + 1) if t in raw[STATE]]
@@ -326,11 +330,12 @@ def write_results(result: dict, trial: int | None, animate: int | None, folder: 
         write_weights(result, folder, pictures)
     if animate is not None:
         animated = trial_series(data, animate)
-        if animated is not None:
-            name = f"trial_{animate}.gif"
-            pictures.animate_trial(animated, params.pole_length, params.track_limit_m,
-                                   params.tau, folder / name, progress)
-            produced.append(name)
+        if animated is None:  # raised inside staged_output: what was written goes too
+            raise UsageError(f"--animate: trial {animate} has no state in the bag")
+        name = f"trial_{animate}.gif"
+        pictures.animate_trial(animated, params.pole_length, params.track_limit_m, params.tau,
+                               folder / name, progress)
+        produced.append(name)
 
 
 def write_weights(result: dict, folder: Path, pictures) -> None:
@@ -413,9 +418,10 @@ def summary_markdown(bag_path: Path, result: dict, salvage: bool) -> str:
         for r in rows:
             ends[r[4]] = ends.get(r[4], 0) + 1
         lines.append("* trial ends: " + ", ".join(f"{k} {v}" for k, v in sorted(ends.items())))
-    pictures = {**PICTURES}
+    pictures = {name: what.format(trial=chosen and chosen["trial"])
+                for name, what in PICTURES.items()}
     if result["animated"] is not None:
-        pictures[f"trial_{result['animated']}.gif"] = ANIMATION.format(result["animated"])
+        pictures[f"trial_{result['animated']}.gif"] = ANIMATION.format(trial=result["animated"])
     lines += ["", "## Pictures", ""]
     lines += [f"* `{name}`: {what}" for name, what in pictures.items()
               if name in result["produced"]]
