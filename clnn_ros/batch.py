@@ -25,9 +25,9 @@ from .core import encoder, physics, random_stream, rln
 from .core.encoder import Encoder, encode_active
 from .core.episode import angle_grid, seed_setup
 from .core.params import Params
-from .core.physics import CONTINUE, cartpole_step, physics_constants
-from .core.rln import (NONE, TIE_RANDOM, Rule, infer, outcome, response_space, restart_counters,
-                       tag_action_path, trial_start_count, update)
+from .core.physics import CONTINUE, cartpole_step, physics_constants, trial_start_state
+from .core.rln import (NEVER, NONE, TIE_RANDOM, Rule, explore, infer, outcome, response_space,
+                       restart_counters, tag_action_path, trial_start_count, update)
 
 
 STALE = -1  # a cached decision made before the weights last changed
@@ -35,7 +35,7 @@ STALE = -1  # a cached decision made before the weights last changed
 
 @numba.njit(cache=True)
 def run_episode_kernel(weights, angles, constants, force, components, edges, offsets, max_steps,
-                       rule, learn, rng, steps_out, status_out):
+                       released, rule, learn, rng, steps_out, status_out):
     """One episode in place: `weights` end as the final weights, per-trial results in the outputs."""
     n_segments, n_inputs = weights.shape[1], weights.shape[2]
     n_vars = components.shape[0]
@@ -45,9 +45,11 @@ def run_episode_kernel(weights, angles, constants, force, components, edges, off
     n_patterns = 1
     for v in range(n_vars):
         n_patterns *= radix[v]
-    _run_trials(weights, angles, constants, force, components, edges, offsets, max_steps, rule,
-                learn, rng, steps_out, status_out, radix, np.empty((n_patterns, 3), np.int64),
-                np.empty((2, n_segments, n_inputs), np.int64), np.empty((2, n_segments), np.int64),
+    _run_trials(weights, angles, constants, force, components, edges, offsets, max_steps,
+                released, rule, learn, rng, steps_out, status_out, radix,
+                np.empty((n_patterns, 3), np.int64),
+                np.full((2, n_segments, n_inputs), NEVER, np.int64),
+                np.full((2, n_segments), NEVER, np.int64),
                 np.zeros((2, n_segments, n_inputs), np.uint8), np.empty(n_vars, np.int64),
                 response_space(n_segments))
 
@@ -55,9 +57,9 @@ def run_episode_kernel(weights, angles, constants, force, components, edges, off
 # No reference counting in the tick loop: it would cost more than the tick's own work. All the
 # arrays it uses are made by run_episode_kernel.
 @numba.njit(cache=True, _nrt=False)
-def _run_trials(weights, angles, constants, force, components, edges, offsets, max_steps, rule,
-                learn, rng, steps_out, status_out, radix, decisions, punish_tagged_at,
-                reward_tagged_at, eligible, active, responses):
+def _run_trials(weights, angles, constants, force, components, edges, offsets, max_steps,
+                released, rule, learn, rng, steps_out, status_out, radix, decisions,
+                punish_tagged_at, reward_tagged_at, eligible, active, responses):
     # The decision for an input pattern depends on the weights only (but for random ties, which
     # draw anew on every tie): it is cached per pattern, and made again when the pattern comes
     # back after a change of the weights.
@@ -66,9 +68,9 @@ def _run_trials(weights, angles, constants, force, components, edges, offsets, m
     now = 0  # the clock of the decay counters
     successes = 0
     for trial in range(angles.shape[0]):
-        restart_counters(punish_tagged_at, reward_tagged_at, eligible)
+        restart_counters(punish_tagged_at, reward_tagged_at, eligible, rule)
         successes = trial_start_count(successes, rule)
-        x, x_dot, theta, theta_dot = 0.0, 0.0, angles[trial], 0.0
+        x, x_dot, theta, theta_dot = trial_start_state(angles[trial], released, constants)
         t = 0
         status = CONTINUE
         while t < max_steps:
@@ -77,8 +79,9 @@ def _run_trials(weights, angles, constants, force, components, edges, offsets, m
             for v in range(active.shape[0]):
                 pattern = pattern * radix[v] + active[v] - offsets[v]
             if decisions[pattern, 0] == STALE or not use_cache:
-                decisions[pattern] = infer(weights, active, rule.tie_break, rng, responses)
+                decisions[pattern] = infer(weights, active, rule, rng, responses)
             neuron, s0, s1 = decisions[pattern, 0], decisions[pattern, 1], decisions[pattern, 2]
+            neuron = explore(neuron, rule, rng)
             tag_action_path(punish_tagged_at, reward_tagged_at, eligible, neuron, (s0, s1),
                             active, now, rule)
             x, x_dot, theta, theta_dot, status = cartpole_step(
@@ -97,11 +100,12 @@ def _run_trials(weights, angles, constants, force, components, edges, offsets, m
 
 
 @numba.njit(parallel=True, cache=True)
-def _run_many(weights, angles, constants, force, components, edges, offsets, max_steps, rule,
-              learn, rng, steps_out, status_out):
+def _run_many(weights, angles, constants, force, components, edges, offsets, max_steps,
+              released, rule, learn, rng, steps_out, status_out):
     for k in numba.prange(weights.shape[0]):
         run_episode_kernel(weights[k], angles[k], constants, force, components, edges, offsets,
-                           max_steps, rule, learn, rng[k], steps_out[k], status_out[k])
+                           max_steps, released, rule, learn, rng[k], steps_out[k],
+                           status_out[k])
 
 
 def _drop_stale_cache() -> None:
@@ -153,7 +157,8 @@ def run_batch(seeds, p: Params, weights: np.ndarray | None = None, angles: np.nd
     status = np.zeros(all_angles.shape, dtype=np.int64)
     start = time.perf_counter()
     _run_many(all_weights, all_angles, physics_constants(p), float(p.force), components, edges,
-              offsets, p.max_steps, Rule.from_params(p), learn, rng, steps, status)
+              offsets, p.max_steps, p.first_action == "no_force", Rule.from_params(p), learn, rng,
+              steps, status)
     wall = time.perf_counter() - start
     return BatchResult(seeds, all_angles, steps, status, all_weights, wall)
 

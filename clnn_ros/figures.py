@@ -20,6 +20,8 @@ END_LABELS = {0: "reached the step cap", 1: "failed: pole angle", 2: "failed: ca
 LINE_STYLES = ("--", ":", "-.", (0, (5, 1, 1, 1)))
 LINE_COLORS = ("black", "tab:purple", "tab:orange", "tab:brown")
 HEADROOM = 1.32  # y axis up to 1.32 x the step cap: room for the legend above the bars
+NEAR_LIMIT = 0.5  # a trace whose motion reaches this fraction of a failure limit shows the limit
+MOTION_MARGIN = 1.1  # a trace's y axis: up to 1.1 x its largest excursion (or limit)
 
 
 def _save(fig, path: Path) -> Path:
@@ -131,23 +133,38 @@ def plot_learning_curves(steps: np.ndarray, path: Path, title: str, lines: dict[
 
 def plot_trace(trace: np.ndarray, first_step: int, path: Path, title: str,
                angle_limit: float, track_limit: float) -> Path:
-    """Figures 10, 11, 15: pole angle and cart position against the step.
+    """Figures 10, 11, 15: pole angle and cart position against the step, each axis scaled to
+    the motion (a balanced pole's +-0.3 deg is flat on a +-12 deg axis); the failure limits are
+    drawn where the motion comes near them.
     `trace` rows are states (x, x_dot, theta_deg, theta_dot_deg); row k is after step first_step + k."""
     step = first_step + np.arange(len(trace))
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(10, 5), sharex=True, constrained_layout=True)
-    top.plot(step, trace[:, 2], color="tab:red", linewidth=0.8)
-    top.axhline(angle_limit, color="gray", linestyle="--", linewidth=0.8)
-    top.axhline(-angle_limit, color="gray", linestyle="--", linewidth=0.8, label="failure limits")
-    top.set_ylabel("pole angle (deg)")
-    top.legend(fontsize=8, loc="upper right")
-    bottom.plot(step, trace[:, 0], color="tab:blue", linewidth=0.8)
-    bottom.axhline(track_limit, color="gray", linestyle="--", linewidth=0.8)
-    bottom.axhline(-track_limit, color="gray", linestyle="--", linewidth=0.8)
-    bottom.set_ylabel("cart position (m)")
+    for ax, values, limit, unit, color, label in (
+            (top, trace[:, 2], angle_limit, "deg", "tab:red", "pole angle (deg)"),
+            (bottom, trace[:, 0], track_limit, "m", "tab:blue", "cart position (m)")):
+        ax.plot(step, values, color=color, linewidth=0.8)
+        ax.set_ylabel(label)
+        _scale_to_motion(ax, values, limit, unit)
     bottom.set_xlabel("step")
     bottom.set_xlim(step[0], step[-1])
     fig.suptitle(title)
     return _save(fig, path)
+
+
+def _scale_to_motion(ax, values: np.ndarray, limit: float, unit: str) -> None:
+    """Symmetric y limits around the motion; the failure limits drawn if it reaches half of them,
+    else named in a corner."""
+    peak = float(np.abs(values).max()) if len(values) else 0.0
+    if peak >= NEAR_LIMIT * limit:
+        for sign in (1, -1):
+            ax.axhline(sign * limit, color="gray", linestyle="--", linewidth=0.8,
+                       label="failure limits" if sign > 0 else None)
+        ax.set_ylim(-limit * MOTION_MARGIN, limit * MOTION_MARGIN)
+        ax.legend(fontsize=8, loc="upper right")
+    else:
+        ax.set_ylim(-max(peak, 1e-6) * MOTION_MARGIN, max(peak, 1e-6) * MOTION_MARGIN)
+        ax.text(0.995, 0.97, f"failure limits +-{limit:g} {unit}, off this scale",
+                transform=ax.transAxes, ha="right", va="top", fontsize=8, color="gray")
 
 
 def plot_edge_scan(edges: np.ndarray, means: dict[str, np.ndarray], path: Path, title: str,
@@ -166,4 +183,60 @@ def plot_edge_scan(edges: np.ndarray, means: dict[str, np.ndarray], path: Path, 
     ax.set_ylim(0, max_steps * HEADROOM)
     ax.set_title(title)
     _legend_on_top(ax)
+    return _save(fig, path)
+
+
+def plot_config_means(labels: list[str], means: np.ndarray, stuck: list[int], path: Path,
+                      title: str, xlabel: str, max_steps: int = 10_000) -> Path:
+    """A sweep: mean steps over the seeds per configuration, with the stuck seeds written on."""
+    fig, ax = plt.subplots(figsize=(max(6, 0.6 * len(labels) + 2), 4), constrained_layout=True)
+    x = np.arange(len(labels))
+    bars = ax.bar(x, means, color="tab:blue")
+    for bar, count in zip(bars, stuck):
+        ax.annotate(f"{count} stuck", (bar.get_x() + bar.get_width() / 2, bar.get_height()),
+                    ha="center", va="bottom", fontsize=7)
+    ax.set_xticks(x, labels, fontsize=8, rotation=30 if len(labels) > 6 else 0, ha="right"
+                  if len(labels) > 6 else "center")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("mean successful steps")
+    ax.set_ylim(0, max_steps * HEADROOM)
+    ax.set_title(title)
+    return _save(fig, path)
+
+
+def plot_heatmap(table: np.ndarray, rows: list, cols: list, names: list[str], path: Path,
+                 title: str, max_steps: int = 10_000) -> Path:
+    """A two-parameter sweep: mean steps over the seeds, one cell per configuration."""
+    fig, ax = plt.subplots(figsize=(max(5, 0.9 * len(cols) + 3), max(3, 0.6 * len(rows) + 2)),
+                           constrained_layout=True)
+    image = ax.imshow(table, cmap="viridis", vmin=0, vmax=max_steps, aspect="auto")
+    for (r, c), value in np.ndenumerate(table):
+        ax.text(c, r, f"{value:,.0f}", ha="center", va="center", fontsize=8,
+                color="white" if value < max_steps / 2 else "black")
+    ax.set_xticks(range(len(cols)), [f"{v:g}" if isinstance(v, float) else v for v in cols])
+    ax.set_yticks(range(len(rows)), [f"{v:g}" if isinstance(v, float) else v for v in rows])
+    ax.set_xlabel(names[1])
+    ax.set_ylabel(names[0])
+    fig.colorbar(image, ax=ax, label="mean successful steps")
+    ax.set_title(title)
+    return _save(fig, path)
+
+
+def plot_sorted_means(panels: list[tuple[str, dict[str, np.ndarray]]], path: Path, title: str,
+                      stuck_below: float, max_steps: int = 10_000) -> Path:
+    """Per-seed means sorted high to low, one line per variant, one panel per encoding."""
+    fig, axes = plt.subplots(1, len(panels), figsize=(5 * len(panels), 4), sharey=True,
+                             constrained_layout=True, squeeze=False)
+    for ax, (label, variants) in zip(axes[0], panels):
+        for k, (name, means) in enumerate(variants.items()):
+            ax.plot(np.sort(means)[::-1], color=LINE_COLORS[k % len(LINE_COLORS)],
+                    linestyle="-" if k == 0 else LINE_STYLES[k % len(LINE_STYLES)], label=name)
+        ax.axhline(stuck_below, color="tab:red", linewidth=0.8, linestyle=":",
+                   label=f"stuck below {stuck_below:,.0f}")
+        ax.set_title(label)
+        ax.set_xlabel("seeds, sorted by mean (high to low)")
+        ax.set_ylim(0, max_steps * HEADROOM)
+        ax.legend(fontsize=8, loc="upper right")
+    axes[0][0].set_ylabel("mean successful steps")
+    fig.suptitle(title)
     return _save(fig, path)

@@ -22,6 +22,8 @@ ARGUMENTS = {
     "seed": ("--seed", f"the episode's seed (run_all's default {run_all.DEMO['seed']})"),
     "trials": ("--trials", f"trials of the episode (default {run_all.DEMO['trials']})"),
     "nsv": ("--nsv", f"1: angle; 2: angle + cart velocity (default {run_all.DEMO['nsv']})"),
+    "state_vars": ("--state-vars", "the encoded state variables instead, in input order, e.g. "
+                                   "pole_angle,cart_position"),
     "params_file": ("--params-file", "a ROS 2 parameters YAML (/**: ros__parameters: ...)"),
     "namespace": ("--namespace", "put every node and topic under /NAME/"),
     "env": ("--env", f"environment node: {', '.join(run_all.ENVIRONMENTS)} (default cartpole)"),

@@ -36,7 +36,7 @@ from . import bag
 from .cli import OneLineArgumentParser
 from .files import cannot_create
 from .core.checkpoint import Checkpoint, load_checkpoint
-from .core.params import ParamError, Params, params_from_strings
+from .core.params import STATE_NAMES, ParamError, Params, params_from_strings
 from .init_weights import OPTIMAL, episode_start
 from .names import GRAPH_NODES, NOT_STARTED, RECORDER, RUN_SETTINGS, TRIAL_MANAGER
 from .nodes.common import EXIT_WITH_STDIN, catch_signals
@@ -72,8 +72,12 @@ def parse_args(argv):
                         f"{DEMO['trials']}); a resume runs those after the checkpoint's")
     parser.add_argument("--nsv", type=int, help=f"1: angle; 2: angle + cart velocity (default "
                         f"{DEMO['nsv']})")
+    parser.add_argument("--state-vars", metavar="NAMES",
+                        help="the encoded state variables instead, in input order, e.g. "
+                             "pole_angle,cart_position (of: " + ", ".join(STATE_NAMES) + ")")
     parser.add_argument("--physics", help="paper (default) or correct")
-    parser.add_argument("--velocity-edge", type=float, help="2 SV: |dx/dt| edge in m/s (Table 1: 5)")
+    parser.add_argument("--velocity-edge", type=float,
+                        help="with cart_velocity encoded: |dx/dt| edge in m/s (Table 1: 5)")
     parser.add_argument("--max-steps", type=int, help="successful steps that end a trial (10000)")
     parser.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                         help="any other model parameter, e.g. --option tie_break=index")
@@ -179,7 +183,10 @@ def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
             values[key.strip()] = yaml.safe_load(value)
         except yaml.YAMLError:
             values[key.strip()] = value  # not YAML: the text, which the check below refuses
+    if args.state_vars is not None:  # they decide nsv
+        values.pop("nsv", None)
     for key, value in (("seed", args.seed), ("trials", args.trials), ("nsv", args.nsv),
+                       ("state_vars", args.state_vars),
                        ("physics", args.physics), ("velocity_edge", args.velocity_edge),
                        ("max_steps", args.max_steps), ("stall_timeout_s", args.stall_timeout)):
         if value is not None:
@@ -194,11 +201,13 @@ def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
             str(Path(args.init_weights).resolve())
     model = {k: v for k, v in values.items() if k not in RUN_SETTINGS}
     params = params_from_strings(model)  # raises ParamError with one line
-    if args.velocity_edge is not None and params.nsv == 1:
-        raise ParamError("--velocity-edge needs --nsv 2 (1 SV encodes the pole angle only)")
+    if args.velocity_edge is not None and "cart_velocity" not in params.state_vars:
+        raise ParamError(f"--velocity-edge needs cart_velocity among the state variables "
+                         f"(this run encodes {','.join(params.state_vars)})")
     # The nodes get the checked values: rcl refuses e.g. a list mixing ints and floats.
     values.update({k: list(v) if isinstance(v, tuple) else v
                    for k, v in params.to_dict().items() if k in model})
+    values["nsv"] = params.nsv  # the count --state-vars gives
     for key in set(values) & set(RUN_SETTINGS):
         values[key] = convert_setting(key, values[key])
     # what each node will do with init_weights, here first: one line for what does not fit
@@ -441,9 +450,14 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
             if not failed and not interrupted and recorder.returncode not in (None, 0):
                 report_failure(recorder)  # it failed first: the graph then stopped
                 failed = True
-            forced = stop_recorder(supervisor, episode_ended=status in (0, 1) and not failed)
+            episode_ended = status in (0, 1) and not failed
+            forced = stop_recorder(supervisor, episode_ended)
+            # Told to stop while still starting (before its handler was set), it dies of the
+            # SIGINT: as told, nothing recorded.
+            stopped_as_told = (0, 128 + signal.SIGINT) + \
+                (() if episode_ended else (-signal.SIGINT,))
             if not failed and not interrupted and not forced and \
-                    recorder.returncode not in (0, 128 + signal.SIGINT):
+                    recorder.returncode not in stopped_as_told:
                 report_failure(recorder)
                 failed = True
         summary = fresh_summary(out, began)
@@ -475,7 +489,9 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
 
 def announce(args, values: dict, checkpoint, namespace: str) -> None:
     mode = "composed (one process)" if args.composed else f"{len(NODES)} processes"
-    print(f"run_all: seed {values['seed']}, {values['trials']} trials, {values['nsv']} SV, "
+    encoded = f"{values['nsv']} SV" if "state_vars" not in values else \
+        "state " + ",".join(values["state_vars"])
+    print(f"run_all: seed {values['seed']}, {values['trials']} trials, {encoded}, "
           f"{mode}" + (f", environment: {args.env_node or args.env}"
                        if args.env_node or args.env != "cartpole" else "")
           + (f", namespace {namespace}" if namespace != "/" else ""), flush=True)

@@ -6,8 +6,9 @@ import pytest
 from clnn_ros.batch import evaluate_weights_batch, run_batch
 from clnn_ros.core.episode import evaluate_weights, run_episode
 from clnn_ros.core.optimal import optimal_weights
-from clnn_ros.core.params import (E_FLAGS, INTEGRATORS, PHYSICS, SUCCESS_COUNTER, TAGGING,
-                                  TIE_BREAKS, Params)
+from clnn_ros.core.params import (DECAY_COUNTERS, E_FLAGS, FIRST_ACTION, INFERENCE, INTEGRATORS,
+                                  PHYSICS, PUNISH_TIMING, SUCCESS_COUNTER, TAGGING, TIE_BREAKS,
+                                  Params)
 
 SEEDS = [0, 5, 11]
 
@@ -29,11 +30,24 @@ CASES = {
     "carried counter": (dict(nsv=1, success_counter="carry"), True),
     "live e 2sv": (dict(nsv=2, velocity_edge=0.5, e_flag="live"), True),
     "live e, carried counter": (dict(nsv=1, e_flag="live", success_counter="carry"), True),
+    "integration slip": (dict(nsv=1, physics="integration_slip"), True),
+    "carried decay counters": (dict(nsv=1, decay_counters="carry"), True),
+    "carried decay counters 2sv": (dict(nsv=2, velocity_edge=0.5, decay_counters="carry"), True),
+    "no force first": (dict(nsv=1, first_action="no_force"), True),
+    "punished after decay": (dict(nsv=1, punish_timing="after_decay"), True),
+    "exact inference": (dict(nsv=2, velocity_edge=0.5, inference="exact"), True),
+    "3 state variables": (dict(nsv=3), True),
+    "4 state variables": (dict(nsv=4, segments=12), True),
+    "angle and position": (dict(state_vars="cart_position,pole_angle"), True),
+    "exploring": (dict(nsv=1, explore=0.002), True),
+    "exploring, random ties": (dict(nsv=2, velocity_edge=0.5, explore=0.01, tie_break="random"),
+                               True),
 }
 
 OPTIONS = {"tie_break": TIE_BREAKS, "tagging": TAGGING, "e_flag": E_FLAGS,
            "success_counter": SUCCESS_COUNTER, "physics": PHYSICS, "integrator": INTEGRATORS,
-           "nsv": (1, 2)}
+           "decay_counters": DECAY_COUNTERS, "first_action": FIRST_ACTION,
+           "punish_timing": PUNISH_TIMING, "inference": INFERENCE, "nsv": (1, 2, 3, 4)}
 
 
 @pytest.mark.parametrize("option", OPTIONS)

@@ -57,6 +57,27 @@ def test_graph_equals_core(ros_env, tmp_path, composed, nsv, options):
     assert "completed: 10 trials" in result.stdout
 
 
+@pytest.mark.parametrize("options", [
+    {"state_vars": "pole_angle,cart_position"},
+    {"state_vars": "cart_position,pole_angular_velocity,pole_angle", "first_action": "no_force",
+     "physics": "integration_slip", "decay_counters": "carry", "punish_timing": "after_decay",
+     "inference": "exact", "explore": 0.002}],
+    ids=["angle and position", "3 SV, every new open choice"])
+def test_graph_equals_core_for_other_encodings_and_choices(ros_env, tmp_path, options):
+    # the encoder node encodes, the environment releases the pole, the agent learns as the core
+    trials, seed = 8, 2
+    given = [arg for name, value in options.items() if name != "state_vars"
+             for arg in ("--option", f"{name}={value}")]
+    result = run_all(ros_env, "--seed", str(seed), "--state-vars", options["state_vars"],
+                     "--trials", str(trials), "--max-steps", "1500", *given,
+                     "--out", str(tmp_path))
+    assert result.returncode == 0, result.stderr
+    core = run_episode(seed, Params(trials=trials, max_steps=1500, **options))
+    assert read_steps(tmp_path) == core.steps.tolist()
+    np.testing.assert_array_equal(np.load(tmp_path / "final_weights.npy"), core.final_weights)
+    assert f"state {options['state_vars']}" in result.stdout
+
+
 def test_ctrl_c_stops_everything(ros_env, tmp_path, in_private_shm):
     """Ctrl-C in a terminal: run_all and every node exit, none is left, and no Fast DDS shared
     memory is left. Where allowed the run has a /dev/shm of its own (other DDS users of the

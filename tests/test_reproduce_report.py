@@ -21,9 +21,12 @@ from clnn_ros.reproduce.figures import Figures, figures_markdown, make_figures
 from clnn_ros.reproduce.gymnasium_physics import (Agreement, GymLearning, GymnasiumStudy,
                                                   gymnasium_markdown, write_gymnasium)
 from clnn_ros.reproduce.learning import PaperRuns, learn_run
+from clnn_ros.reproduce.local_optima import EXPLORE, ExploreRun, local_optima_markdown
 from clnn_ros.reproduce.open_choices import (DEFAULTS, VELOCITY_EDGE, OptionRun,
                                              open_choices_markdown, write_open_choices)
 from clnn_ros.reproduce.physics_modes import ModeLearning, physics_markdown, write_physics
+from clnn_ros.reproduce.sensitivity import (FACTORS, SWEPT, Sensitivity, sensitivity_markdown,
+                                          sensitivity_verdict)
 from clnn_ros.reproduce.report import (claims_markdown, data_files_markdown, header_markdown,
                                        write_report)
 
@@ -112,6 +115,19 @@ def _options() -> list[OptionRun]:
             OptionRun(VELOCITY_EDGE, "0.5", 2, 0.5, seeds, means, fig12_mean=4000.0)]
 
 
+def _sensitivity() -> list[Sensitivity]:
+    """1 SV: every parameter within 10 % at x 1/2 and x 2 but sigma (halved: -50 %)."""
+    base = np.array([1000.0, 2000.0, 3000.0])
+    rows = {(name, factor): base * (0.5 if (name, factor) == ("sigma", 0.5) else 1.05)
+            for name in SWEPT for factor in FACTORS}
+    return [Sensitivity(Params(), "1 SV", base, rows)]
+
+
+def _explore_runs() -> list[ExploreRun]:
+    steps = np.array([[500.0] * 4, [5000.0] * 4, [8000.0] * 4])
+    return [ExploreRun("1 SV", e, steps + (600.0 if e else 0.0)) for e in EXPLORE]
+
+
 def _tables(text: str) -> list[list[str]]:
     """Each Markdown table in `text` as its lines."""
     return [block.splitlines() for block in re.findall(r"(?:^\|.*\|$\n?)+", text, re.M)]
@@ -128,6 +144,8 @@ def test_report_sections_and_tables(tmp_path, runs):
                 claims_markdown(cal, runs), figures_markdown(figs, runs, rel),
                 physics_markdown(cal, _physics(), len(SEEDS)),
                 open_choices_markdown(_options(), BEST_EDGE, len(SEEDS)),
+                sensitivity_markdown(_sensitivity(), len(SEEDS)),
+                local_optima_markdown(_explore_runs(), "figures/local_optima.png"),
                 data_files_markdown(files, tmp_path),
                 gymnasium_markdown(gym, runs, _physics(), gym_files, rel)]
     assert write_report(report, sections) == report
@@ -136,13 +154,17 @@ def test_report_sections_and_tables(tmp_path, runs):
     assert "Runtime 123 s on" in text and "3 seeds (0-2) for the paper's runs" in text
     titles = re.findall(r"^## (.*)$", text, re.M)
     assert titles == ["Paper vs measured", "Figures", "Paper physics vs correct physics",
-                      "Open choices, one at a time", "Data files", "Gymnasium's physics (CartPole-v1)"]
+                      "Open choices, one at a time", "Sensitivity to the Table 2 parameters",
+                      "Local optima: a way out", "Data files", "Gymnasium's physics (CartPole-v1)"]
     assert "![fig07](figures/fig07.png)" in text
-    assert "**Figure 15: steps 5000-6000 of a successful 2-SV trial.** Not drawn" in text
+    assert re.search(r"\*\*Figure 15: steps 5000-6000 of a successful 2-SV trial[^*]*\*\* "
+                     r"Not drawn", text)
     assert "All in `data/`: `calib_no_force.csv`" in text
     assert "| 1 SV | 0 | 4/4 | — |" in text and "| 2 SV best | 0 | 2/4 | 2 |" in text
     tables = _tables(text)
-    assert len(tables) == 8  # claims, sensitivity, 2 physics, 2 options, 2 gymnasium
+    # claims, sensitivity of Fig. 7, 2 physics, 2 options, Table 2 sensitivity (one encoding),
+    # local optima, 2 gymnasium
+    assert len(tables) == 10
     for table in tables:
         cells = {len(re.split(r"(?<!\\)\|", line)) for line in table}
         assert len(cells) == 1, table  # every row has the header's columns
@@ -179,3 +201,16 @@ def test_make_figures_writes_every_png(tmp_path, runs):
     for name, path in figs.paths.items():
         assert path == tmp_path / f"{name}.png"
         assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_sensitivity_verdict_names_what_moves():
+    verdict = sensitivity_verdict(_sensitivity())
+    assert "1 SV: it holds for omega, rho_plus, rho_minus, punish, segments, w_max; not for " \
+           "sigma (50%)." in verdict
+
+
+def test_local_optima_table_and_verdict():
+    md = local_optima_markdown(_explore_runs(), "figures/local_optima.png")
+    assert "| 1 SV | 0 | 4,500 | 1 | 4,500 | 1 |" in md
+    assert "explore = 0.001 leaves 0 seeds stuck (deterministic: 1)" in md
+    assert "![local optima](figures/local_optima.png)" in md

@@ -121,12 +121,20 @@ def test_fig15_note_like_1sv_only_inside_the_central_intervals(monkeypatch, max_
     monkeypatch.setattr(figures, "velocity_ignored", lambda w, p: list(figures.CENTRAL_INTERVALS))
     states = np.zeros((10, 4))
     states[3, 2] = -max_angle
-    trace = figures.Trace(seed=0, seed_mean=9000.0, angle=0.1, weights=optimal_weights(2),
-                          params=Params(nsv=2), steps=10_000, status=CONTINUE, states=states,
-                          first=5000)
+    trace = figures.Trace(seed=0, seed_mean=9000.0, trial=300, angle=0.1,
+                          weights=optimal_weights(2), params=Params(nsv=2), steps=10_000,
+                          status=CONTINUE, states=states, first=5000)
     note = figures.fig15_note(trace)
     assert note.endswith("so it moves like a 1-SV trial.") is like_1sv
     assert "interval(s) 3, 4" in note
+
+
+def test_figure15_seed_rule_wants_the_velocity_used_in_a_central_interval():
+    p = Params(nsv=2)
+    assert figures.uses_velocity(optimal_weights(2), p)
+    blind = optimal_weights(2).copy()
+    blind[:, :, 6:] = 0.0  # no velocity synapse: the velocity input never decides
+    assert not figures.uses_velocity(blind, p)
 
 
 def test_velocity_ignored_by_figure12_weights():

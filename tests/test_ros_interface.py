@@ -86,7 +86,8 @@ def test_parameters_describe_their_meaning_and_constraints(agent_by_hand):
     assert described["sigma"].description.startswith("success window")
     assert (described["sigma"].integer_range[0].from_value,
             described["sigma"].integer_range[0].to_value) == (1, 2**31 - 1)
-    assert described["physics"].additional_constraints == "one of: paper, correct"
+    assert described["physics"].additional_constraints == \
+        "one of: paper, correct, integration_slip"
     assert described["rho_plus"].floating_point_range[0].from_value == 0.0
     assert described["seed"].integer_range[0].to_value == 2**32 - 1
 

@@ -4,10 +4,10 @@
     angle (deg):      [-12,-6) [-6,-1) [-1,0) [0,1) [1,6) [6,12]      6 inputs
     cart velocity:    (-inf,-e) [-e,e) [e,+inf)                        3 inputs (e = 5 m/s in Table 1)
 
-The edges are parameters (Params.angle_edges_deg, velocity_edge), so another state space is
-encoded without code changes. Only the interior edges matter: a value below the first edge falls
-in the first interval, one at or above the last in the last (the environment fails the trial
-before the angle leaves +-12 deg).
+Beyond the paper, any of the four state variables in any order (Params.state_vars), each with
+its edges as parameters (Params.edges_of). Only the interior edges matter: a value below the
+first edge falls in the first interval, one at or above the last in the last (the environment
+fails the trial before the angle leaves +-12 deg).
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ from functools import cached_property
 import numpy as np
 from numba.extending import register_jitable
 
-from .params import ANGLE_EDGES_DEG, Params  # noqa: F401  (Table 1 edges, the default)
-STATE_NAMES = ("cart_position", "cart_velocity", "pole_angle", "pole_angular_velocity")
+from .params import STATE_NAMES, Params
+
 STATE_UNITS = ("m", "m/s", "deg", "deg/s")
 
 
@@ -32,9 +32,8 @@ class Encoder:
 
     @classmethod
     def from_params(cls, p: Params) -> "Encoder":
-        if p.nsv == 1:
-            return cls((2,), (p.angle_edges_deg,))
-        return cls((2, 1), (p.angle_edges_deg, (-p.velocity_edge, p.velocity_edge)))
+        return cls(tuple(STATE_NAMES.index(v) for v in p.state_vars),
+                   tuple(p.edges_of(v) for v in p.state_vars))
 
     @property
     def n_inputs(self) -> int:

@@ -9,13 +9,25 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, fields
 
-PHYSICS = ("paper", "correct")
+PHYSICS = ("paper", "correct", "integration_slip")
 INTEGRATORS = ("semi_implicit", "euler")
 TIE_BREAKS = ("exact", "index", "random")
 TAGGING = ("winner", "both_neurons")
 E_FLAGS = ("latched", "live")
 SUCCESS_COUNTER = ("per_trial", "carry")
+DECAY_COUNTERS = ("per_trial", "carry")
+FIRST_ACTION = ("infer", "no_force")
+PUNISH_TIMING = ("before_decay", "after_decay")
+INFERENCE = ("ceiled", "exact")
 ANGLE_EDGES_DEG = (-6.0, -1.0, 0.0, 1.0, 6.0)  # Table 1 interior angle edges, deg
+# The cart-pole state, in the order of the state vector (x, x_dot, theta, theta_dot).
+STATE_NAMES = ("cart_position", "cart_velocity", "pole_angle", "pole_angular_velocity")
+# The encoded state variables for nsv = 1, 2, 3, 4 (the paper's two first, its Table 1 order).
+STATE_VAR_ORDER = ("pole_angle", "cart_velocity", "cart_position", "pole_angular_velocity")
+EDGE_FIELDS = ("angle_edges_deg", "position_edges_m", "angular_velocity_edges_deg_per_s")
+
+
+MAX_SEGMENTS = 256  # Action.winning_segment is a uint8
 
 
 class ParamError(ValueError):
@@ -27,8 +39,13 @@ class Params:
     """All model parameters. Defaults: Table 2 and section 3 of the paper, `paper` conventions."""
 
     # Network and learning (section 3.2 and Table 2).
-    nsv: int = 1  # state variables encoded: 1 = angle, 2 = angle + cart velocity
-    segments: int | None = None  # segments per neuron; None = 3 (1 SV) or 9 (2 SV), as in the paper
+    nsv: int | None = None  # how many state variables are encoded; None: len(state_vars), or 1
+    # Which, in input order (a tuple, or text "pole_angle,cart_velocity"); None: the first nsv of
+    # STATE_VAR_ORDER (1 = angle, 2 = angle + cart velocity, as in the paper).
+    state_vars: tuple | None = None
+    # Segments per neuron; None: half the number of input combinations, rounded up (the paper's
+    # 3 for 1 SV, 6 intervals, and 9 for 2 SV, 6 x 3 combinations).
+    segments: int | None = None
     sigma: int = 256  # success window: positive reward every sigma successful steps
     omega: int = 256  # punishment window: length of the action path punished on failure
     rho_plus: float = 1 / 128  # maximum reward capture (synapses whose e flag is 1)
@@ -47,6 +64,10 @@ class Params:
     # Encoder (Table 1): interior interval edges. A tuple, or text "-6,-1,0,1,6" (ROS/YAML).
     angle_edges_deg: tuple = ANGLE_EDGES_DEG  # pole angle, deg: len + 1 inputs (Table 1: 6)
     velocity_edge: float = 5.0  # |dx/dt| edge between the 3 velocity intervals, m/s
+    # Not in the paper (its way forward): thirds of the track, and the median |theta_dot| of the
+    # Figure 7 weights' trials under the paper's physics.
+    position_edges_m: tuple = (-0.8, 0.8)
+    angular_velocity_edges_deg_per_s: tuple = (-3.0, 3.0)
 
     # Environment (section 1.2).
     physics: str = "paper"  # "paper": the units slip that reproduces the figures; "correct": true equations
@@ -65,30 +86,54 @@ class Params:
     tagging: str = "winner"  # tag only the action path ("winner") or the winning segment of both neurons
     e_flag: str = "latched"  # e flag latched at tagging ("latched") or read at reward time ("live")
     success_counter: str = "per_trial"  # success counter reset each trial ("per_trial") or kept ("carry")
+    decay_counters: str = "per_trial"  # decay counters and e flags reset each trial, or kept ("carry")
+    first_action: str = "infer"  # the network acts on the initial state, or "no_force": the pole
+    # is released with F = 0 for one step first (not a successful step: the network did not act)
+    punish_timing: str = "before_decay"  # the path's head gets c- = omega, or omega - 1 ("after_decay")
+    inference: str = "ceiled"  # segment response: sum of ceil(w) ("ceiled") or of w ("exact")
+    # A way out of local optima (not in the paper): the network WTA's winner is overruled with
+    # this probability and the other neuron acts (its winning segment is the path's).
+    explore: float = 0.0
 
     # Derived values; not set by users.
     n_inputs: int = field(init=False)
     n_segments: int = field(init=False)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "angle_edges_deg", parse_edges(self.angle_edges_deg))
+        for name in EDGE_FIELDS:
+            object.__setattr__(self, name, parse_edges(getattr(self, name), name))
+        names = resolve_state_vars(self.state_vars, self.nsv)
+        object.__setattr__(self, "state_vars", names)
+        object.__setattr__(self, "nsv", len(names))
         self.validate()
-        object.__setattr__(self, "n_inputs", len(self.angle_edges_deg) + 1 + 3 * (self.nsv == 2))
-        object.__setattr__(self, "n_segments", self.segments or (3 if self.nsv == 1 else 9))
+        intervals = [len(self.edges_of(v)) + 1 for v in names]
+        object.__setattr__(self, "n_inputs", sum(intervals))
+        object.__setattr__(self, "n_segments", self.segments or -(-math.prod(intervals) // 2))
+
+    def edges_of(self, state_var: str) -> tuple[float, ...]:
+        """The interior interval edges of a state variable, in its unit."""
+        if state_var == "cart_velocity":
+            return (-self.velocity_edge, self.velocity_edge)
+        return {"pole_angle": self.angle_edges_deg, "cart_position": self.position_edges_m,
+                "pole_angular_velocity": self.angular_velocity_edges_deg_per_s}[state_var]
 
     def validate(self) -> None:
         """Raise ParamError with one clear line for the first bad value found."""
-        _choice("nsv", self.nsv, (1, 2), "state variables: 1 (angle) or 2 (angle and cart velocity)")
         _choice("physics", self.physics, PHYSICS)
         _choice("integrator", self.integrator, INTEGRATORS)
         _choice("tie_break", self.tie_break, TIE_BREAKS)
         _choice("tagging", self.tagging, TAGGING)
         _choice("e_flag", self.e_flag, E_FLAGS)
         _choice("success_counter", self.success_counter, SUCCESS_COUNTER)
+        _choice("decay_counters", self.decay_counters, DECAY_COUNTERS)
+        _choice("first_action", self.first_action, FIRST_ACTION)
+        _choice("punish_timing", self.punish_timing, PUNISH_TIMING)
+        _choice("inference", self.inference, INFERENCE)
         segments = self.segments
         if segments is not None and (isinstance(segments, bool) or not isinstance(segments, int)
-                                     or not 1 <= segments <= 64):
-            raise ParamError(f"segments must be an integer from 1 to 64, got {segments!r}")
+                                     or not 1 <= segments <= MAX_SEGMENTS):
+            raise ParamError(f"segments must be an integer from 1 to {MAX_SEGMENTS}, "
+                             f"got {segments!r}")
         for name in ("sigma", "omega", "trials", "max_steps", "n_angles"):
             value = getattr(self, name)
             # Counts travel in the messages' uint32 fields (trial, successful_steps).
@@ -97,7 +142,7 @@ class Params:
         positive = ("w_max", "cart_mass", "pole_mass", "pole_length", "gravity", "tau",
                     "angle_limit_deg", "track_limit_m", "velocity_edge")
         non_negative = ("rho_plus", "rho_minus", "punish", "w_base", "w_range", "force",
-                        "angle_span_deg")
+                        "angle_span_deg", "explore")
         for name in positive + non_negative:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
@@ -106,6 +151,8 @@ class Params:
                 raise ParamError(f"{name} must be > 0, got {value!r}")
             if value < 0:
                 raise ParamError(f"{name} must be >= 0, got {value!r}")
+        if not 0 <= self.explore <= 1:
+            raise ParamError(f"explore must be a probability from 0 to 1, got {self.explore!r}")
         if self.w_base + self.w_range > self.w_max:
             raise ParamError(f"w_base + w_range ({self.w_base + self.w_range:g}) must not exceed "
                              f"w_max ({self.w_max:g})")
@@ -115,9 +162,11 @@ class Params:
         if self.angle_span_deg >= self.angle_limit_deg:
             raise ParamError(f"angle_span_deg ({self.angle_span_deg:g}) must be below "
                              f"angle_limit_deg ({self.angle_limit_deg:g})")
+        for name in EDGE_FIELDS:
+            edges = getattr(self, name)
+            if any(b <= a for a, b in zip(edges, edges[1:])):
+                raise ParamError(f"{name} must be strictly increasing, got {list(edges)}")
         edges = self.angle_edges_deg
-        if any(b <= a for a, b in zip(edges, edges[1:])):
-            raise ParamError(f"angle_edges_deg must be strictly increasing, got {list(edges)}")
         if not all(abs(e) < self.angle_limit_deg for e in edges):
             raise ParamError(f"angle_edges_deg must lie inside +-angle_limit_deg "
                              f"({self.angle_limit_deg:g}), got {list(edges)}")
@@ -129,6 +178,11 @@ class Params:
         if unknown:
             raise ParamError(f"unknown parameter(s): {', '.join(sorted(unknown))}; "
                              f"known: {', '.join(sorted(current))}")
+        # nsv and state_vars say the same thing: a change of one alone decides both
+        if "state_vars" in changes and "nsv" not in changes:
+            current["nsv"] = None
+        if "nsv" in changes and "state_vars" not in changes:
+            current["state_vars"] = None
         return Params(**{**current, **changes})
 
     def to_dict(self) -> dict:
@@ -143,23 +197,50 @@ def _choice(name: str, value, allowed: tuple, meaning: str | None = None) -> Non
                          + f", got {value!r}")
 
 
-def parse_edges(value) -> tuple[float, ...]:
-    """Interior interval edges from a tuple/list of numbers or text "-6,-1,0,1,6" (brackets
-    allowed): a tuple of at least one finite float, else one ParamError line."""
-    items = value
+def _items(value) -> list | tuple:
+    """The items of a list given as a tuple/list or as text "a,b" (brackets allowed)."""
     if isinstance(value, str):
         text = value.strip().removeprefix("[").removesuffix("]")
-        items = [t for t in text.replace(" ", ",").split(",") if t]
+        return [t.strip("'\"") for t in text.replace(" ", ",").split(",") if t]
+    return value
+
+
+def parse_edges(value, name: str = "angle_edges_deg") -> tuple[float, ...]:
+    """Interior interval edges from a tuple/list of numbers or text "-6,-1,0,1,6": a tuple of
+    at least one finite float, else one ParamError line."""
+    items = _items(value)
     try:
         if not isinstance(items, (list, tuple)) or any(isinstance(e, bool) for e in items):
             raise ValueError
         edges = tuple(float(e) for e in items)
     except (TypeError, ValueError):
-        raise ParamError(f"angle_edges_deg must be numbers separated by commas, "
-                         f"got {value!r}") from None
+        raise ParamError(f"{name} must be numbers separated by commas, got {value!r}") from None
     if not edges or not all(math.isfinite(e) for e in edges):
-        raise ParamError(f"angle_edges_deg must be one or more finite numbers, got {value!r}")
+        raise ParamError(f"{name} must be one or more finite numbers, got {value!r}")
     return edges
+
+
+def resolve_state_vars(value, nsv) -> tuple[str, ...]:
+    """The encoded state variables from state_vars (names, or text "a,b") and nsv; one
+    ParamError line for unknown or repeated names, or an nsv that does not match."""
+    if nsv is not None and (isinstance(nsv, bool) or nsv not in range(1, 5)):
+        raise ParamError(f"nsv must be 1, 2, 3 or 4 (state variables encoded), got {nsv!r}")
+    if value is None:
+        return STATE_VAR_ORDER[:nsv or 1]
+    items = _items(value)
+    if not isinstance(items, (list, tuple)) or not items or \
+            not all(isinstance(v, str) for v in items):
+        raise ParamError(f"state_vars must be names separated by commas, got {value!r}")
+    names = tuple(items)
+    unknown = [v for v in names if v not in STATE_NAMES]
+    if unknown:
+        raise ParamError(f"state_vars: unknown {unknown[0]!r}; known: {', '.join(STATE_NAMES)}")
+    if len(set(names)) != len(names):
+        raise ParamError(f"state_vars names a variable twice: {','.join(names)}")
+    if nsv is not None and nsv != len(names):
+        raise ParamError(f"nsv ({nsv}) must be the number of state_vars ({len(names)}: "
+                         f"{','.join(names)}), or not given")
+    return names
 
 
 def params_from_strings(values: dict[str, str], base: Params | None = None) -> Params:
@@ -172,9 +253,9 @@ def params_from_strings(values: dict[str, str], base: Params | None = None) -> P
         if name not in current:
             raise ParamError(f"unknown parameter {name!r}; known: {', '.join(sorted(current))}")
         default = current[name]
-        kind = int if name in ("segments",) or isinstance(default, int) else type(default)
+        kind = int if name in ("segments", "nsv") or isinstance(default, int) else type(default)
         try:
-            if kind is tuple:
+            if kind is tuple or name == "state_vars":
                 converted[name] = text  # Params parses and validates it
             elif isinstance(text, kind) and not isinstance(text, bool):
                 converted[name] = text
@@ -191,4 +272,5 @@ def params_from_strings(values: dict[str, str], base: Params | None = None) -> P
 
 
 __all__ = ["Params", "ParamError", "params_from_strings", "PHYSICS", "INTEGRATORS", "TIE_BREAKS",
-           "TAGGING", "E_FLAGS", "SUCCESS_COUNTER"]
+           "TAGGING", "E_FLAGS", "SUCCESS_COUNTER", "DECAY_COUNTERS", "FIRST_ACTION",
+           "PUNISH_TIMING", "INFERENCE", "STATE_NAMES", "STATE_VAR_ORDER"]

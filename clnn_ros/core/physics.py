@@ -19,6 +19,9 @@ Two physics modes:
   a slow pole. Evidence: with it, no force lets the pole fall in ~275 steps and a constant force
   drives the cart off the track in exactly 32 steps, the paper's section 3.1 figures (correct
   physics gives ~35 steps for the first). See docs/REPRODUCTION.md.
+* ``integration_slip``: the other reading of that slip, in the integration only: theta_acc in
+  rad/s^2 is added to theta_dot in deg/s, but the cart equation sees the true theta_acc (rad/s^2).
+  A constant force then drives the cart off the track in 29 steps, not the paper's 32.
 
 Integrators: ``semi_implicit`` Euler, velocities first (x_dot += tau x_acc; x += tau x_dot; ...),
 the paper's default, or explicit ``euler`` (positions from the old velocities, as Gymnasium's
@@ -43,18 +46,21 @@ CONTINUE, FAIL_ANGLE, FAIL_POSITION = 0, 1, 2
 def physics_constants(p: Params) -> tuple:
     """The numbers cartpole_step needs, as a flat tuple (numba passes tuples cheaply)."""
     # How theta_acc in rad/s^2 becomes deg/s^2 in the state: the paper's slip skips the 180/pi.
-    angular_to_state = 1.0 if p.physics == "paper" else 180.0 / math.pi
+    angular_to_state = 180.0 / math.pi if p.physics == "correct" else 1.0
+    # How that deg/s^2 becomes the rad/s^2 the cart equation sees: with integration_slip the cart
+    # sees theta_acc itself.
+    state_to_cart = 1.0 if p.physics == "integration_slip" else DEG
     return (p.cart_mass + p.pole_mass, p.pole_mass * p.pole_length, p.pole_length, p.gravity,
-            p.tau, angular_to_state, p.integrator == "semi_implicit", p.angle_limit_deg,
-            p.track_limit_m)
+            p.tau, angular_to_state, state_to_cart, p.integrator == "semi_implicit",
+            p.angle_limit_deg, p.track_limit_m)
 
 
 @register_jitable
 def cartpole_step(x, x_dot, theta_deg, theta_dot_deg, force, constants):
     """Advance one time step tau under `force` (N). Returns (x, x_dot, theta_deg, theta_dot_deg, status)
     with status CONTINUE, FAIL_ANGLE or FAIL_POSITION."""
-    (total_mass, pole_mass_length, length, gravity, tau, angular_to_state, semi_implicit,
-     angle_limit_deg, track_limit_m) = constants
+    (total_mass, pole_mass_length, length, gravity, tau, angular_to_state, state_to_cart,
+     semi_implicit, angle_limit_deg, track_limit_m) = constants
     theta = theta_deg * DEG
     theta_dot = theta_dot_deg * DEG
     sin_theta = math.sin(theta)
@@ -63,7 +69,7 @@ def cartpole_step(x, x_dot, theta_deg, theta_dot_deg, force, constants):
                   - cos_theta * (force + pole_mass_length * theta_dot * theta_dot * sin_theta))
                  / ((4.0 / 3.0) * total_mass * length - pole_mass_length * cos_theta * cos_theta))
     theta_acc_state = theta_acc * angular_to_state  # deg/s^2 as added to theta_dot_deg
-    theta_acc_seen = theta_acc_state * DEG  # what the cart equation sees, rad/s^2
+    theta_acc_seen = theta_acc_state * state_to_cart  # what the cart equation sees, rad/s^2
     x_acc = (force + pole_mass_length * (theta_dot * theta_dot * sin_theta
                                          - theta_acc_seen * cos_theta)) / total_mass
     if semi_implicit:
@@ -84,6 +90,18 @@ def cartpole_step(x, x_dot, theta_deg, theta_dot_deg, force, constants):
     return x, x_dot, theta_deg, theta_dot_deg, status
 
 
+@register_jitable
+def trial_start_state(initial_angle_deg, released, constants):
+    """A trial's first state: cart centred and at rest, pole at rest at the initial angle; with
+    `released` (first_action="no_force") that state one step of F = 0 later (whether that step
+    crossed a limit is told by the network's first step)."""
+    if not released:
+        return 0.0, 0.0, initial_angle_deg, 0.0
+    x, x_dot, theta_deg, theta_dot_deg, _ = cartpole_step(0.0, 0.0, initial_angle_deg, 0.0, 0.0,
+                                                          constants)
+    return x, x_dot, theta_deg, theta_dot_deg
+
+
 class CartPole:
     """The environment as an object: reset to an initial angle, step with an action (0 = -F, 1 = +F)."""
 
@@ -93,8 +111,10 @@ class CartPole:
         self.state = (0.0, 0.0, 0.0, 0.0)
 
     def reset(self, initial_angle_deg: float) -> tuple:
-        """Trial start: cart centred and at rest, pole at rest at the given angle."""
-        self.state = (0.0, 0.0, float(initial_angle_deg), 0.0)
+        """Trial start: cart centred and at rest, pole at rest at the given angle (or one F = 0
+        step later: first_action="no_force")."""
+        self.state = trial_start_state(float(initial_angle_deg),
+                                       self.params.first_action == "no_force", self._constants)
         return self.state
 
     def step(self, action: int) -> int:

@@ -5,7 +5,8 @@ segment has one synapse per encoder input. The per-synapse state is that of the 
 5 and 6: decay counters (each kept as the tick at which it was set, see below) and e flags.
 
 Inference (every tick, section 2.2):
-    segment response = sum over spiking inputs of ceil(w)      (small-integer inference)
+    segment response = sum over spiking inputs of ceil(w)      (small-integer inference;
+                                                                inference="exact": of w)
     dendrite WTA picks each neuron's best segment, network WTA picks the neuron (the action).
     Ties (all initial weights ceil to 5) are broken by the exact un-ceiled sums, then the lowest
     index (`tie_break="exact"`); "index" skips the exact sums, "random" picks among the tied.
@@ -16,15 +17,17 @@ c+ = sigma and each of its synapses an e flag latched now (1 if its input spiked
 
 Update, after the environment step (section 2.3, Figure 6):
     punishment (failure):   w -= pi * c- / omega            for every synapse with c- > 0
+                            (punish_timing="after_decay": the counters decay first)
     reward (every sigma-th success):
                             w += rho+ * c+ / sigma  if e = 1,  w -= rho- * c+ / sigma  if e = 0,
                             for every synapse of every segment with c+ > 0
-    then every counter decays by one; weights are clipped to [0, w_max].
+    then every counter decays by one; weights are clipped to [0, w_max]. A trial starts with
+    every decay counter and e flag at 0 (decay_counters="carry": as the last trial left them).
 
 The rule is written once, as the functions below (`register_jitable`: plain Python when called
 from Python, compiled into the numba batch engine, clnn_ros.batch, which calls the same
-functions). Every option of the rule (tie_break, tagging, e_flag, success_counter) is decided
-here and nowhere else. The classes at the end hold the state and call them, tick by tick.
+functions). Every option of the rule (tie_break, inference, tagging, e_flag, punish_timing,
+decay_counters, success_counter) is decided here and nowhere else. The classes at the end hold the state and call them, tick by tick.
 """
 
 from __future__ import annotations
@@ -67,28 +70,35 @@ class Rule(NamedTuple):
     tag_both: bool  # tagging="both_neurons"
     e_latched: bool  # e_flag="latched"
     counter_per_trial: bool  # success_counter="per_trial"
+    ceiled: bool  # inference="ceiled"
+    punish_lag: int  # punish_timing: 0 "before_decay", 1 "after_decay" (ticks of decay first)
+    decay_per_trial: bool  # decay_counters="per_trial"
+    explore: float  # probability that the network WTA's winner is overruled
 
     @classmethod
     def from_params(cls, p: Params) -> "Rule":
         return cls(int(p.sigma), int(p.omega), float(p.rho_plus), float(p.rho_minus),
                    float(p.punish), float(p.w_max), TIE_BREAKS.index(p.tie_break),
                    p.tagging == "both_neurons", p.e_flag == "latched",
-                   p.success_counter == "per_trial")
+                   p.success_counter == "per_trial", p.inference == "ceiled",
+                   int(p.punish_timing == "after_decay"), p.decay_counters == "per_trial",
+                   float(p.explore))
 
 
 # ---- inference (section 2.2) -------------------------------------------------------------------
 
 @kernel
-def segment_response(weights, neuron, segment, active):
-    """(sum of ceil(w), sum of w) over the synapses of the spiking inputs `active` (indices): the
-    small-integer response, and the exact one that can break its ties."""
-    ceiled = 0.0
+def segment_response(weights, neuron, segment, active, ceil):
+    """(response, sum of w) over the synapses of the spiking inputs `active` (indices): the
+    response is the small-integer sum of ceil(w) (or with `ceil` False the exact one), the exact
+    sum can break its ties."""
+    response = 0.0
     exact = 0.0
     for i in active:
         w = weights[neuron, segment, i]
-        ceiled += math.ceil(w)
+        response += math.ceil(w) if ceil else w
         exact += w
-    return ceiled, exact
+    return response, exact
 
 
 @kernel
@@ -121,25 +131,34 @@ def response_space(n_segments):
 
 
 @kernel
-def dendrite_winner(weights, neuron, active, tie_break, random_state, ceiled, exact):
+def dendrite_winner(weights, neuron, active, rule, random_state, ceiled, exact):
     """The dendrite WTA: the winning segment of one neuron."""
     n_segments = weights.shape[1]
     for s in range(n_segments):
-        ceiled[s], exact[s] = segment_response(weights, neuron, s, active)
-    return wta(ceiled, exact, n_segments, tie_break, random_state)
+        ceiled[s], exact[s] = segment_response(weights, neuron, s, active, rule.ceiled)
+    return wta(ceiled, exact, n_segments, rule.tie_break, random_state)
 
 
 @kernel
-def infer(weights, active, tie_break, random_state, responses):
+def infer(weights, active, rule, random_state, responses):
     """(winning neuron, dendrite winner of neuron 0, of neuron 1) for the spiking inputs
     `active`: the dendrite WTA within each neuron, then the network WTA between the two.
     `responses`: scratch space from response_space()."""
     ceiled, exact = responses[0], responses[1]
-    s0 = dendrite_winner(weights, 0, active, tie_break, random_state, ceiled, exact)
-    s1 = dendrite_winner(weights, 1, active, tie_break, random_state, ceiled, exact)
-    ceiled[0], exact[0] = segment_response(weights, 0, s0, active)
-    ceiled[1], exact[1] = segment_response(weights, 1, s1, active)
-    return wta(ceiled, exact, 2, tie_break, random_state), s0, s1
+    s0 = dendrite_winner(weights, 0, active, rule, random_state, ceiled, exact)
+    s1 = dendrite_winner(weights, 1, active, rule, random_state, ceiled, exact)
+    ceiled[0], exact[0] = segment_response(weights, 0, s0, active, rule.ceiled)
+    ceiled[1], exact[1] = segment_response(weights, 1, s1, active, rule.ceiled)
+    return wta(ceiled, exact, 2, rule.tie_break, random_state), s0, s1
+
+
+@tick_kernel
+def explore(neuron, rule, random_state):
+    """The neuron that acts: the network WTA's winner, or with probability rule.explore the
+    other one (a draw on every tick only when exploring)."""
+    if rule.explore > 0.0 and next_uniform(random_state) < rule.explore:
+        return 1 - neuron
+    return neuron
 
 
 # ---- decay counters (Figures 5 and 6) ---------------------------------------------------------
@@ -159,11 +178,13 @@ def counter_value(tagged_at, now, window):
 
 
 @kernel
-def restart_counters(punish_tagged_at, reward_tagged_at, eligible):
-    """A trial starts with every decay counter and e flag at 0."""
-    punish_tagged_at[:] = NEVER
-    reward_tagged_at[:] = NEVER
-    eligible[:] = 0
+def restart_counters(punish_tagged_at, reward_tagged_at, eligible, rule):
+    """A trial starts with every decay counter and e flag at 0 (decay_counters="carry": as the
+    last trial left them)."""
+    if rule.decay_per_trial:
+        punish_tagged_at[:] = NEVER
+        reward_tagged_at[:] = NEVER
+        eligible[:] = 0
 
 
 # ---- tagging (section 2.3) ---------------------------------------------------------------------
@@ -200,12 +221,13 @@ def clip_weight(w, w_max):
 
 @kernel
 def punish(weights, punish_tagged_at, now, rule):
-    """w -= pi * c- / omega on every synapse with c- > 0."""
+    """w -= pi * c- / omega on every synapse with c- > 0 (punish_timing="after_decay": the
+    counters' values after this tick's decay)."""
     n_neurons, n_segments, n_inputs = weights.shape
     for n in range(n_neurons):
         for s in range(n_segments):
             for i in range(n_inputs):
-                c = counter_value(punish_tagged_at[n, s, i], now, rule.omega)
+                c = counter_value(punish_tagged_at[n, s, i], now + rule.punish_lag, rule.omega)
                 if c > 0:
                     weights[n, s, i] = clip_weight(
                         weights[n, s, i] - rule.punish * c / rule.omega, rule.w_max)
@@ -347,13 +369,14 @@ class RLNAgent:
             setattr(self, name, value)
 
     def begin_trial(self) -> None:
-        """Counters and e flags restart with each trial; the weights carry over."""
-        restart_counters(self.punish_tagged_at, self.reward_tagged_at, self.eligible)
+        """Counters and e flags restart with each trial (unless decay_counters="carry"); the
+        weights carry over."""
+        restart_counters(self.punish_tagged_at, self.reward_tagged_at, self.eligible, self.rule)
 
     def infer(self, spikes: np.ndarray) -> tuple[int, tuple[int, int]]:
         """(winning neuron, the dendrite winner of each neuron) for a spike vector."""
         with np.errstate(over="ignore"):  # tie_break="random": the stream wraps around by design
-            neuron, s0, s1 = infer(self.weights, np.flatnonzero(spikes), self.rule.tie_break,
+            neuron, s0, s1 = infer(self.weights, np.flatnonzero(spikes), self.rule,
                                    self.random_state, response_space(self.p.n_segments))
         return neuron, (s0, s1)
 
@@ -362,6 +385,8 @@ class RLNAgent:
         its winning segment)."""
         spikes = np.asarray(spikes, dtype=np.uint8)
         neuron, segments = self.infer(spikes)
+        with np.errstate(over="ignore"):  # the random stream wraps around by design
+            neuron = explore(neuron, self.rule, self.random_state)
         self.last_spikes = spikes
         tag_action_path(self.punish_tagged_at, self.reward_tagged_at, self.eligible, neuron,
                         segments, np.flatnonzero(spikes), self.tick, self.rule)

@@ -15,8 +15,9 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 
 from ..names import RUN_SETTINGS
-from ..core.params import (E_FLAGS, INTEGRATORS, PHYSICS, SUCCESS_COUNTER, TAGGING, TIE_BREAKS,
-                           ParamError, Params, params_from_strings)
+from ..core.params import (DECAY_COUNTERS, E_FLAGS, FIRST_ACTION, INFERENCE, INTEGRATORS,
+                           MAX_SEGMENTS, PHYSICS, PUNISH_TIMING, STATE_NAMES, SUCCESS_COUNTER,
+                           TAGGING, TIE_BREAKS, ParamError, Params, params_from_strings)
 
 # Parameters rclpy itself declares.
 ROS_BUILTIN_PARAMETERS = {"use_sim_time", "start_type_description_service"}
@@ -26,9 +27,13 @@ POSITIVE = (0.0, sys.float_info.max)  # > 0 (Params refuses 0)
 NON_NEGATIVE = (0.0, sys.float_info.max)
 # name: (description, (lowest, highest) or choices)
 DESCRIPTIONS = {
-    "nsv": ("state variables encoded: 1 = pole angle, 2 = angle and cart velocity", (1, 2)),
-    "segments": ("dendritic segments per neuron; not given: the paper's, 3 for 1 SV and 9 for "
-                 "2 SV (declared with the count in use)", (1, 64)),
+    "nsv": ("how many state variables are encoded: 1 = pole angle, 2 = angle and cart velocity, "
+            "3 and 4 add cart position and pole angular velocity (or as state_vars says)", (1, 4)),
+    "state_vars": ("the encoded state variables, in input order (any of: "
+                   + ", ".join(STATE_NAMES) + ")", None),
+    "segments": ("dendritic segments per neuron; not given: half the input combinations, the "
+                 "paper's 3 for 1 SV and 9 for 2 SV (declared with the count in use)",
+                 (1, MAX_SEGMENTS)),
     "sigma": ("success window: a positive reward every sigma successful steps", COUNT),
     "omega": ("punishment window: length of the action path punished on a failure", COUNT),
     "rho_plus": ("maximum reward capture (synapses whose e flag is 1)", NON_NEGATIVE),
@@ -43,9 +48,12 @@ DESCRIPTIONS = {
     "angle_span_deg": ("initial angles span +-this, deg", NON_NEGATIVE),
     "angle_edges_deg": ("encoder: interior edges of the pole-angle intervals, deg (Table 1)",
                         None),
-    "velocity_edge": ("encoder, 2 SV: |cart velocity| edge between its 3 intervals, m/s",
-                      POSITIVE),
-    "physics": ("cart-pole equations: paper (its units slip) or correct", PHYSICS),
+    "velocity_edge": ("encoder: |cart velocity| edge between its 3 intervals, m/s", POSITIVE),
+    "position_edges_m": ("encoder: interior edges of the cart-position intervals, m", None),
+    "angular_velocity_edges_deg_per_s": ("encoder: interior edges of the pole angular-velocity "
+                                         "intervals, deg/s", None),
+    "physics": ("cart-pole equations: paper (its units slip), correct, or integration_slip (the "
+                "slip in the pole's integration only)", PHYSICS),
     "integrator": ("physics integration", INTEGRATORS),
     "cart_mass": ("kg", POSITIVE), "pole_mass": ("kg", POSITIVE),
     "pole_length": ("half the pole's length, m", POSITIVE), "gravity": ("m/s^2", POSITIVE),
@@ -57,6 +65,14 @@ DESCRIPTIONS = {
     "tagging": ("which segments are tagged for learning", TAGGING),
     "e_flag": ("e flag latched at tagging or read at reward time", E_FLAGS),
     "success_counter": ("success counter reset each trial or carried", SUCCESS_COUNTER),
+    "decay_counters": ("decay counters and e flags reset each trial or carried", DECAY_COUNTERS),
+    "first_action": ("the network acts on the initial state, or the pole is released with F = 0 "
+                     "for one step first", FIRST_ACTION),
+    "punish_timing": ("the punished path's head gets omega (before the decay) or omega - 1",
+                      PUNISH_TIMING),
+    "inference": ("segment response: sum of ceil(w) or of w", INFERENCE),
+    "explore": ("probability that the network WTA's winner is overruled and the other neuron "
+                "acts (a way out of local optima; the paper: 0)", (0.0, 1.0)),
     "seed": ("the episode's seed: initial weights, initial angles", (0, 2**32 - 1)),
     "stall_timeout_s": ("seconds without progress before the graph is declared stalled",
                         POSITIVE),

@@ -3,12 +3,15 @@ generated report docs/REPRODUCTION.md.
 
     python -m clnn_ros.reproduce calibrate [--out DIR]
     python -m clnn_ros.reproduce learn --nsv 1 --seeds 0-31 --trials 512 --out DIR [--option key=value]
+    python -m clnn_ros.reproduce learn --state-vars pole_angle,cart_position --seeds 0-3 --out DIR
+    python -m clnn_ros.reproduce sweep --param sigma=128,256 [--param ...] --nsv 1 --seeds 0-3 --trials 64 --out DIR
     python -m clnn_ros.reproduce figures [--out DIR] [--seeds 0-31]
     python -m clnn_ros.reproduce all [--out docs]
 
 Every run uses the numba batch engine (clnn_ros.batch) except the traces of Figures 10, 11 and 15,
-which replay one trial with the pure core (clnn_ros.core.episode.run_trial, learn=False) on the
-batch engine's final weights. Each experiment's settings stand at the top of its module.
+which replay one trial of a learned episode with the pure core (clnn_ros.core.episode.run_trial,
+learning) from the weights the batch engine had at its start. Each experiment's settings stand at
+the top of its module.
 """
 
 from __future__ import annotations
@@ -20,22 +23,32 @@ import time
 from pathlib import Path
 
 from ..cli import OneLineArgumentParser
-from ..core.params import ParamError, Params, params_from_strings
+from ..core.params import STATE_NAMES, ParamError, Params, params_from_strings
 from .calibration import calibrate, print_calibration, write_calibration
 from .common import DEFAULT_SEEDS, LITERAL_EDGE, TRIALS, parse_seeds, stuck
 from .figures import figures_markdown, make_figures
 from .gymnasium_physics import SELECT_SEEDS, gymnasium_markdown, gymnasium_study, write_gymnasium
 from .learning import learn_run, paper_runs, print_seed_means, write_learn_outputs
 from .open_choices import OPTION_SEEDS, open_choices, open_choices_markdown, write_open_choices
+from .local_optima import (LOCAL_OPTIMA_SEEDS, local_optima, local_optima_markdown,
+                           plot_local_optima, write_local_optima)
 from .physics_modes import physics_markdown, physics_runs, write_physics
+from .sensitivity import (SENSITIVITY_SEEDS, check_sweep_names, parse_grid,
+                          sensitivity, sensitivity_markdown, sweep, sweep_summary_markdown,
+                          write_sensitivity, write_sweep, write_sweep_report)
 from .report import claims_markdown, data_files_markdown, header_markdown, write_report
 
-OWN_FLAGS = {"nsv": "--nsv", "trials": "--trials", "velocity_edge": "--velocity-edge",
+OWN_FLAGS = {"nsv": "--nsv", "state_vars": "--state-vars", "trials": "--trials",
+             "velocity_edge": "--velocity-edge",
              "physics": "--physics"}  # Params fields `learn` sets with a flag, not --option
 
 
 def learn_params(args) -> Params:
-    values = {"nsv": str(args.nsv), "trials": str(args.trials)}
+    values = {"trials": str(args.trials)}
+    if args.nsv is not None:
+        values["nsv"] = str(args.nsv)
+    if args.state_vars is not None:
+        values["state_vars"] = args.state_vars
     if args.velocity_edge is not None:
         values["velocity_edge"] = args.velocity_edge
     if args.physics is not None:
@@ -67,6 +80,17 @@ def cmd_learn(args) -> None:
     print("wrote " + ", ".join(str(f) for f in files))
 
 
+def cmd_sweep(args) -> None:
+    seeds = parse_seeds(args.seeds)
+    grid = parse_grid(args.param)
+    check_sweep_names(grid)
+    runs = sweep(learn_params(args), grid, seeds)
+    files = write_sweep(runs, Path(args.out))
+    figure, summary = write_sweep_report(runs, args.seeds, Path(args.out))
+    print(sweep_summary_markdown(runs))
+    print(f"wrote {len(files)} CSV files, {figure} and {summary}")
+
+
 def cmd_figures(args) -> None:
     seeds = parse_seeds(args.seeds)
     cal = calibrate()
@@ -91,6 +115,15 @@ def cmd_all(args) -> None:
     files.append(write_physics(physics, data))
     options = open_choices(option_seeds, cal)
     files += write_open_choices(options, data)
+    bases = [("1 SV", Params(nsv=1, trials=TRIALS)),
+             (f"2 SV, edge {cal.best_edge:g}", Params(nsv=2, trials=TRIALS,
+                                                      velocity_edge=cal.best_edge))]
+    sensitivity_seeds, optima_seeds = parse_seeds(SENSITIVITY_SEEDS), parse_seeds(LOCAL_OPTIMA_SEEDS)
+    sens = sensitivity(bases, sensitivity_seeds)
+    files.append(write_sensitivity(sens, data))
+    optima = local_optima(optima_seeds, cal)
+    files.append(write_local_optima(optima, data))
+    optima_figure = plot_local_optima(optima, fig_dir / "local_optima.png")
     figs = make_figures(cal, runs, fig_dir)
     gym = gymnasium_study(seeds, parse_seeds(SELECT_SEEDS))
     gym_files = write_gymnasium(gym, data)
@@ -104,6 +137,8 @@ def cmd_all(args) -> None:
         figures_markdown(figs, runs, rel),
         physics_markdown(cal, physics, len(seeds)),
         open_choices_markdown(options, cal.best_edge, len(option_seeds)),
+        sensitivity_markdown(sens, len(sensitivity_seeds)),
+        local_optima_markdown(optima, rel(optima_figure)),
         data_files_markdown(files, report.parent),
         gymnasium_markdown(gym, runs, physics, gym_files, rel)])
     print(f"wrote {path}, {len(figs.paths)} figures, {len(files)} data files "
@@ -121,8 +156,12 @@ def build_parser() -> argparse.ArgumentParser:
     c.set_defaults(func=cmd_calibrate)
 
     ln = sub.add_parser("learn", help="learning episodes with the batch engine, CSV + NPZ out")
-    ln.add_argument("--nsv", type=int, choices=(1, 2), required=True,
-                    help="state variables: 1 (angle) or 2 (angle and cart velocity)")
+    ln.add_argument("--nsv", type=int, choices=(1, 2, 3, 4),
+                    help="state variables: 1 (angle, the default), 2 (and cart velocity), 3 (and "
+                         "cart position), 4 (and pole angular velocity)")
+    ln.add_argument("--state-vars", metavar="NAMES",
+                    help="the encoded state variables instead, in input order, of: "
+                         + ", ".join(STATE_NAMES))
     ln.add_argument("--seeds", default=DEFAULT_SEEDS, help="seeds, e.g. 0-31, 0,3,5 or 0-3,7")
     ln.add_argument("--trials", type=int, default=TRIALS, help="trials per episode")
     ln.add_argument("--velocity-edge", type=str, default=None,
@@ -132,6 +171,22 @@ def build_parser() -> argparse.ArgumentParser:
                     help="any other Params field, e.g. tie_break=index (repeatable)")
     ln.add_argument("--out", default="out/learn", help="folder for learn_<n>sv.csv and weights")
     ln.set_defaults(func=cmd_learn)
+
+    sw = sub.add_parser("sweep", help="a grid of parameter values, CSV per configuration, a "
+                                      "summary and a figure")
+    sw.add_argument("--param", action="append", default=[], metavar="NAME=V1,V2,...",
+                    help="a model parameter and its values (repeatable: the grid is every "
+                         "combination)")
+    sw.add_argument("--nsv", type=int, choices=(1, 2, 3, 4), help="state variables (default 1)")
+    sw.add_argument("--state-vars", metavar="NAMES", help="the encoded state variables instead")
+    sw.add_argument("--seeds", default=DEFAULT_SEEDS, help="seeds, e.g. 0-31")
+    sw.add_argument("--trials", type=int, default=TRIALS, help="trials per episode")
+    sw.add_argument("--velocity-edge", type=str, default=None, help="velocity edge in m/s")
+    sw.add_argument("--physics", default=None, help="paper (default) or correct")
+    sw.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                    help="any other Params field, fixed for the whole grid")
+    sw.add_argument("--out", default="out/sweep", help="folder for the CSV files, figure, summary")
+    sw.set_defaults(func=cmd_sweep)
 
     fg = sub.add_parser("figures", help="Figures 7-15 as PNG (runs what they need)")
     fg.add_argument("--out", default="out/figures", help="folder for the PNG files")

@@ -101,11 +101,13 @@ def progress(items, desc: str):
     return tqdm(items, desc=desc, leave=False, disable=None, file=sys.stderr)
 
 
-def trace_trial(weights: np.ndarray, angle_deg: float, p: Params) -> tuple[np.ndarray, int, int]:
-    """Replay one trial without learning through the core; (states (steps+1, 4), steps, status).
-    Row 0 is the initial state, row k the state after step k."""
-    states = [(0.0, 0.0, float(angle_deg), 0.0)]
-    agent = RLNAgent(p, weights)
-    steps, status = run_trial(agent, SuccessCounter(p), CartPole(p), Encoder.from_params(p),
-                              angle_deg, p, learn=False, trace=states.append)
+def trace_trial(weights: np.ndarray, angle_deg: float, p: Params, learn: bool = False,
+                seed: int = 0) -> tuple[np.ndarray, int, int]:
+    """Replay one trial through the core, from these weights at its start; (states (steps+1, 4),
+    steps, status). Row 0 is the initial state, row k the state after step k."""
+    agent = RLNAgent(p, weights, seed=seed)
+    env = CartPole(p)
+    states = [env.reset(angle_deg)]
+    steps, status = run_trial(agent, SuccessCounter(p), env, Encoder.from_params(p), angle_deg, p,
+                              learn=learn, trace=states.append)
     return np.array(states), steps, status

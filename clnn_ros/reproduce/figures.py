@@ -1,5 +1,5 @@
 """Figures 7-15 (plus the edge scan and the learning curves) as PNGs, the traces of Figures 10, 11
-and 15 (the core replays one trial on a seed's final weights), and their captions in the report."""
+and 15 (the core replays one trial of a learned episode), and their captions in the report."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from typing import Callable
 import numpy as np
 
 from .. import figures as plots
-from ..batch import evaluate_weights_batch
+from ..batch import run_batch
 from ..core.optimal import optimal_weights
 from ..core.params import Params
 from ..core.physics import CONTINUE, FAIL_POSITION
@@ -31,13 +31,14 @@ CENTRAL_SPAN_DEG = 1.0
 
 @dataclass
 class Trace:
-    """One trial replayed through the core without learning on a seed's final weights."""
+    """One trial of a learned episode, replayed through the core with learning on."""
     seed: int
     seed_mean: float  # that seed's mean steps while learning
+    trial: int  # the trial of the episode
     angle: float  # initial angle, deg
-    weights: np.ndarray
+    weights: np.ndarray  # at the trial's start
     params: Params
-    steps: int  # the trial's steps and end status in the batch engine's evaluation
+    steps: int  # the trial's steps and end status in the episode (batch engine)
     status: int
     states: np.ndarray  # (steps, 4) from step `first` on
     first: int  # the step of states[0]
@@ -64,34 +65,45 @@ def velocity_ignored(weights: np.ndarray, p: Params) -> list[int]:
     return ignored
 
 
-def pick_trace(run: Run, want: str) -> Trace | None:
-    """A typical trial after learning: seeds are tried from the one whose mean is closest to the
-    median seed mean outwards; the seed's final weights are evaluated on the 32 grid angles
-    (batch engine) and the trial wanted ("cart" = failed by the cart, "cap" = reached the cap)
-    with the median step count among those is replayed through the core."""
+def uses_velocity(weights: np.ndarray, p: Params) -> bool:
+    """Whether 2-SV weights choose by the velocity input in a central angle interval (where a
+    balanced pole spends its time): the rule that picks Figure 15's seed."""
+    return not set(CENTRAL_INTERVALS) <= set(velocity_ignored(weights, p))
+
+
+def pick_trace(run: Run, want: str, seed_rule: Callable[[np.ndarray, Params], bool] | None = None
+               ) -> Trace | None:
+    """A typical trial of a learned episode, as the paper's Figures 10, 11 and 15 show: seeds
+    are tried from the one whose mean is closest to the median seed mean outwards (those whose
+    final weights pass `seed_rule`); among the trials of the episode's second half that ended
+    as wanted ("cart" = failed by the cart, "cap" = reached the cap) the one with the median
+    step count is replayed through the core, learning, from the weights the batch engine had
+    at its start."""
     means = run.seed_means
     order = np.argsort(np.abs(means - np.median(means)), kind="stable")
+    r, p = run.result, run.params
     for k in order:
-        weights = run.result.final_weights[k]
-        ev = evaluate_weights_batch(weights, run.params)
-        steps, status = ev.steps[0], ev.end_status[0]
-        ok = status == (FAIL_POSITION if want == "cart" else CONTINUE)
-        if not ok.any():
+        if seed_rule is not None and not seed_rule(r.final_weights[k], p):
             continue
-        candidates = np.flatnonzero(ok)
-        pick = candidates[np.argsort(steps[candidates], kind="stable")[len(candidates) // 2]]
-        angle = float(ev.initial_angles[0, pick])
-        p = run.params
-        if want == "cap":  # only the section is plotted
-            p = p.replace(max_steps=min(p.max_steps, SUCCESS_SECTION[1]))
-        states, _, _ = trace_trial(weights, angle, p)
-        first = 0
-        if want == "cap":
-            first = max(0, min(SUCCESS_SECTION[0], len(states) - 1))
-            states = states[first:]
-        return Trace(seed=int(run.result.seeds[k]), seed_mean=float(means[k]), angle=angle,
-                     weights=weights, params=run.params, steps=int(steps[pick]),
-                     status=int(status[pick]), states=states, first=first)
+        wanted = FAIL_POSITION if want == "cart" else CONTINUE
+        half = r.steps.shape[1] // 2
+        candidates = half + np.flatnonzero(r.end_status[k, half:] == wanted)
+        if not len(candidates):
+            continue
+        trial = int(candidates[np.argsort(r.steps[k, candidates], kind="stable")
+                               [len(candidates) // 2]])
+        seed = int(r.seeds[k])
+        weights = run_batch([seed], p.replace(trials=trial)).final_weights[0]
+        shown = p.replace(max_steps=min(p.max_steps, SUCCESS_SECTION[1])) if want == "cap" else p
+        angle = float(r.initial_angles[k, trial])
+        states, steps, status = trace_trial(weights, angle, shown, learn=True, seed=seed)
+        if want == "cart" and (steps, status) != (r.steps[k, trial], r.end_status[k, trial]):
+            raise RuntimeError(f"seed {seed} trial {trial}: the core's replay ({steps} steps) "
+                               f"is not the episode's ({r.steps[k, trial]})")
+        first = max(0, min(SUCCESS_SECTION[0], len(states) - 1)) if want == "cap" else 0
+        return Trace(seed=seed, seed_mean=float(means[k]), trial=trial, angle=angle,
+                     weights=weights, params=p, steps=int(r.steps[k, trial]),
+                     status=int(r.end_status[k, trial]), states=states[first:], first=first)
     return None
 
 
@@ -146,20 +158,17 @@ def make_figures(cal: Calibration, runs: PaperRuns, out: Path) -> Figures:
     paths = {name: plot(out / f"{name}.png") for name, plot in progress(jobs, "figures")}
 
     limits = (Params().angle_limit_deg, Params().track_limit_m)
-    trace_jobs = (("fig10", runs.one_sv, "cart", "Figure 10: a typical failing trial"),
-                  ("fig11", runs.one_sv, "cap", "Figure 11: a section of a successful trial"),
-                  ("fig15", runs.two_sv_best, "cap", "Figure 15: a section of a successful trial"))
+    trace_jobs = (("fig10", runs.one_sv, "cart", None, "Figure 10: a typical failing trial"),
+                  ("fig11", runs.one_sv, "cap", None, "Figure 11: a section of a successful trial"),
+                  ("fig15", runs.two_sv_best, "cap", uses_velocity,
+                   "Figure 15: a section of a successful trial"))
     traces = {}
-    for name, run, want, title in progress(trace_jobs, "traces"):
-        t = pick_trace(run, want)
-        if t is None and name == "fig15":  # no capped trial at the best edge: try the literal edge
-            run = runs.two_sv_literal
-            t = pick_trace(run, want)
-        traces[name] = t
+    for name, run, want, rule, title in progress(trace_jobs, "traces"):
+        t = traces[name] = pick_trace(run, want, rule)
         if t is None:
             continue
-        detail = (f"{run.label}; seed {t.seed} (episode mean {t.seed_mean:.0f}), final weights, "
-                  f"no learning; start {t.angle:+.3f} deg; {t.steps} steps, "
+        detail = (f"{run.label}; seed {t.seed} (episode mean {t.seed_mean:.0f}), trial {t.trial} "
+                  f"of its episode, learning; start {t.angle:+.3f} deg; {t.steps} steps, "
                   f"{END_REASONS[t.status].replace('_', ' ')}")
         paths[name] = plots.plot_trace(t.states, t.first, out / f"{name}.png",
                                        f"{title}\n{detail}", *limits)
@@ -190,12 +199,16 @@ def figures_markdown(figs: Figures, runs: PaperRuns, rel: Callable[[Path], str])
         "learning_curves_1sv": "Learning curves, 1 SV (each seed faint, mean bold).",
         "learning_curves_2sv": "Learning curves, 2 SV at the literal edge.",
         f"learning_curves_{runs.two_sv_best.name}": "Learning curves, 2 SV at the scan's best edge.",
-        "fig10": "Figure 10: a typical failing 1-SV trial (final weights of a median seed, replayed "
-                 "without learning).",
-        "fig11": f"Figure 11: {section} of a successful 1-SV trial.",
+        "fig10": "Figure 10: a typical failing 1-SV trial of a learned episode (the median seed's "
+                 "trials of the second half that the cart ended: the one of median length, "
+                 "replayed through the core, learning; each axis scaled to the motion).",
+        "fig11": f"Figure 11: {section} of a successful 1-SV trial of a learned episode (chosen "
+                 f"as for Figure 10 among the trials that reached the cap).",
         "fig14_literal_edge": "Figure 14: 2-SV per-seed means, sorted, literal edge.",
         "fig14_best_edge": "Figure 14: 2-SV per-seed means, sorted, the scan's best edge.",
-        "fig15": f"Figure 15: {section} of a successful 2-SV trial.",
+        "fig15": f"Figure 15: {section} of a successful 2-SV trial of a learned episode, from the "
+                 f"seed nearest the median whose learned weights choose by the velocity input in a "
+                 f"central angle interval ([-1,0) or [0,1) deg, where a balanced pole stays).",
     }
     if figs.traces.get("fig15") is not None:
         captions["fig15"] += fig15_note(figs.traces["fig15"])

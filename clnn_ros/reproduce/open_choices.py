@@ -18,11 +18,17 @@ from .common import LITERAL_EDGE, STUCK_BELOW, TRIALS, md_table, progress, stuck
 # ------------------------------------------------------------------------------------------------
 # Settings
 # ------------------------------------------------------------------------------------------------
-OPTION_SEEDS = "0-63"  # more seeds than the paper's 32: the batch engine makes them cheap
+OPTION_SEEDS = "0-127"  # four times the paper's 32: the batch engine makes them cheap
 OPTIONS = (  # each switched alone from the paper defaults
-    ("tie_break", "index"), ("tie_break", "random"), ("tagging", "both_neurons"),
-    ("e_flag", "live"), ("success_counter", "carry"), ("integrator", "euler"),
-    ("physics", "correct"))
+    ("tie_break", "index"), ("tie_break", "random"), ("inference", "exact"),
+    ("tagging", "both_neurons"), ("e_flag", "live"), ("punish_timing", "after_decay"),
+    ("decay_counters", "carry"), ("success_counter", "carry"), ("first_action", "no_force"),
+    ("integrator", "euler"), ("physics", "correct"), ("physics", "integration_slip"),
+    ("angle_span_deg", 0.75), ("angle_span_deg", 3.0),  # the start-angle grid of learning
+    ("n_angles", 8),
+    ("w_range", 1.0),  # initial weights spread over a whole integer: no ties at the start
+    ("w_base", 2.5),
+    ("explore", 0.001))  # the way out of local optima (local_optima.py)
 EDGES = (0.1, 0.25, 0.5, 1.0, 2.0, 5.0)  # 2-SV learning at these edges (+ the scan's best)
 DEFAULTS = "(paper defaults)"  # the option column of the unchanged runs
 VELOCITY_EDGE = "velocity_edge"  # the option column of the edge rows
@@ -43,7 +49,8 @@ def open_choices(seeds, cal: Calibration) -> list[OptionRun]:
     """Each open choice switched alone from the paper defaults; 1 SV, 2 SV literal and best edge;
     then 2 SV at each of EDGES and the best edge."""
     edge = cal.best_edge
-    configs = [(DEFAULTS, "", {})] + [(k, v, {k: v}) for k, v in OPTIONS]
+    configs = [(DEFAULTS, "", {})] + [(k, f"{v:g}" if isinstance(v, float) else str(v), {k: v})
+                                      for k, v in OPTIONS]
     jobs = [(name, value, nsv, e, change)
             for name, value, change in configs
             for nsv, e in ((1, LITERAL_EDGE), (2, LITERAL_EDGE), (2, edge))]
