@@ -1,5 +1,6 @@
 """Writing result files so that a full disk or an unwritable file costs one clear line and
-never a file already written: each is written to a temporary file beside it, then renamed."""
+never a file already written: each is written to a temporary file beside it, then renamed; and
+whether an output directory can be made, asked before anything is written."""
 
 from __future__ import annotations
 
@@ -34,3 +35,16 @@ def describe_write_error(error: OSError, path=None) -> str:
     if error.errno in (errno.ENOSPC, errno.EDQUOT):
         return f"disk full writing {where}"
     return f"cannot write {where}: {error.strerror or error}"
+
+
+def cannot_create(directory: Path) -> str | None:
+    """Why `directory` can neither be used nor created, or None: it, or else its nearest
+    existing ancestor, must be a writable directory."""
+    existing = directory.absolute()
+    while not existing.exists():
+        existing = existing.parent
+    if not existing.is_dir():
+        return f"{existing} is not a directory"
+    if not os.access(existing, os.W_OK | os.X_OK):
+        return f"{existing} is not writable"
+    return None

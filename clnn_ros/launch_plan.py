@@ -66,7 +66,8 @@ def plan(arguments: dict[str, str], workdir: Path) -> list[NodeLaunch]:
     if not args.no_record:
         bag_path = (args.bag or run_all.default_bag_path(args.out)).resolve()
         nodes.append(NodeLaunch(RECORDER, namespace, run_all.write_params(
-            workdir / "recorder_params.yaml", {**values, "bag_path": str(bag_path)}), remappings))
+            workdir / "recorder_params.yaml",
+            {**values, "bag_path": str(bag_path), "environment": args.env}), remappings))
         values["extra_nodes"] = RECORDER
     environment = run_all.ENVIRONMENTS[args.env]
     if environment is None:

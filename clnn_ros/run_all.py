@@ -34,6 +34,7 @@ from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before r
 
 from . import bag
 from .cli import OneLineArgumentParser
+from .files import cannot_create
 from .core.checkpoint import Checkpoint, load_checkpoint
 from .core.params import STATE_NAMES, ParamError, Params, params_from_strings
 from .init_weights import OPTIMAL, episode_start
@@ -165,19 +166,6 @@ def namespace_problem(name: str) -> str | None:
                                       all(c.isalnum() or c == "_" for c in t) and t.isascii()
                                       for t in tokens):
         return "expected letters, digits and _ (not starting with a digit), '/' between levels"
-    return None
-
-
-def cannot_create(directory: Path) -> str | None:
-    """Why `directory` can neither be used nor created, or None: it, or else its nearest
-    existing ancestor, must be a writable directory."""
-    existing = directory.absolute()
-    while not existing.exists():
-        existing = existing.parent
-    if not existing.is_dir():
-        return f"{existing} is not a directory"
-    if not os.access(existing, os.W_OK | os.X_OK):
-        return f"{existing} is not writable"
     return None
 
 
@@ -355,12 +343,12 @@ def run_composed(values: dict, environment: str | None, namespace: str,
 
 
 def start_recorder(supervisor: Supervisor, values: dict, bag_path: Path, workdir: Path,
-                   namespace: str) -> None:
+                   namespace: str, environment: str) -> None:
     """The recorder: its own process, also in composed mode; OSError if the bag's directory
-    cannot be created."""
+    cannot be created. `environment`: what runs as the environment node, kept in the bag."""
     bag_path.mkdir(parents=True, exist_ok=True)
-    params_file = write_params(workdir / "recorder_params.yaml",
-                               {**values, "bag_path": str(bag_path)})
+    params_file = write_params(workdir / "recorder_params.yaml", {
+        **values, "bag_path": str(bag_path), "environment": environment})
     supervisor.start(RECORDER, [sys.executable, "-m", "clnn_ros.nodes.recorder",
                                 *ros_arguments(params_file, namespace)], child_environment())
 
@@ -439,7 +427,7 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
             bag_path = (args.bag or default_bag_path(args.out)).resolve()
             try:
                 start_recorder(supervisor, {**values, "extra_nodes": ""}, bag_path, Path(tmp),
-                               namespace)
+                               namespace, args.env_node or args.env)
             except OSError as error:
                 print(f"run_all: error: cannot write the bag {bag_path}: {error}", file=sys.stderr)
                 return 2

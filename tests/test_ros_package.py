@@ -108,6 +108,7 @@ def test_the_launch_plan_is_run_alls_graph_with_its_parameters(tmp_path, monkeyp
                      "extra_nodes": "recorder"}
     recorder = params(nodes[0].params_file)
     assert Path(recorder.pop("bag_path")).parent == tmp_path / "bags"
+    assert recorder.pop("environment") == "cartpole"  # kept in the bag for analyze's summary
     assert recorder == {k: v for k, v in graph.items() if k != "extra_nodes"}
     assert all(n.params_file == nodes[1].params_file for n in nodes[1:])
 

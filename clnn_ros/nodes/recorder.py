@@ -15,7 +15,7 @@ index, metadata.yaml) on EPISODE_END (a normal end, or a stall the trial manager
 Ctrl-C, on SIGTERM and when run_all goes away. A chunk goes to the file half a second after its
 first message (bag.CHUNK_SECONDS), so a SIGKILL loses at most that; `python -m clnn_ros.bag repair`
 then makes a finished copy. A bag that holds no message is removed. The run's parameters are stored
-in the bag's `clnn_ros` metadata record. Exit status 0, 130/143 after a signal, 2 for bad
+in the bag's `clnn_ros` metadata record, with the environment node (parameter `environment`). Exit status 0, 130/143 after a signal, 2 for bad
 parameters, 1 if the bag cannot be written (a full disk: one line).
 """
 
@@ -59,8 +59,12 @@ class RecorderNode(Node):
                          parameter_overrides=[Parameter(k, value=v)
                                               for k, v in (overrides or {}).items()])
         params, settings = declare_parameters(
-            self, own={"bag_path": ("", "the bag directory the recorder writes")})
+            self, own={"bag_path": ("", "the bag directory the recorder writes"),
+                       "environment": ("", "what ran as the environment node, kept in the bag "
+                                       "(run_all sets it): cartpole, gymnasium, external or "
+                                       "the --env-node command")})
         bag_path = settings.pop("bag_path")
+        environment = settings.pop("environment")
         if not bag_path:
             raise ParamError("bag_path is not set (-p bag_path:=DIRECTORY)")
         self.path = Path(bag_path)
@@ -71,7 +75,8 @@ class RecorderNode(Node):
                  for k, v in params.to_dict().items() if v != defaults[k]}
         self.bag.add_metadata("clnn_ros", {
             "parameters": json.dumps({**given, **settings}, sort_keys=True),
-            "namespace": self.get_namespace(), "bag_format": "clnn_ros.bag"})
+            "namespace": self.get_namespace(), "environment": environment,
+            "bag_format": "clnn_ros.bag"})
         self.channels = {}     # topic -> channel id
         self.counts = {topic: 0 for topic in TOPIC_TYPES}
         self.last_tick = {}    # per-tick topic -> sim time of its last message
