@@ -53,13 +53,14 @@ RECORDER = "recorder"
 # Settings of a run that are not model parameters (every node takes them), with their defaults
 # (clnn_ros.nodes.parameters describes them).
 RUN_SETTINGS = {"seed": 0, "stall_timeout_s": 5.0, "out_dir": "", "progress": True,
-                "extra_nodes": "", "external_nodes": "", "init_weights": ""}
+                "extra_nodes": "", "external_nodes": "", "init_weights": "",
+                "marker_period_ticks": 5}
 # The trial manager's exit status when the graph never started: another graph of the same names
 # runs in the namespace (0 done, 1 failed, 2 bad input, 128 + N signal N).
 NOT_STARTED = 3
 # Who publishes what within a tick, in causal order.
 PUBLISHED_BY = {CLOCK: TRIAL_MANAGER, TRIAL_EVENT: TRIAL_MANAGER, STATE: "environment",
-                MARKERS: "environment", SPIKES: "encoder", REWARD: "reward", ACTION: "agent", WEIGHTS: "agent"}
+                SPIKES: "encoder", REWARD: "reward", ACTION: "agent", WEIGHTS: "agent"}
 
 
 def absolute(topic: str, namespace: str = "/") -> str:

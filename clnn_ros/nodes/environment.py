@@ -4,9 +4,10 @@
 
 Tick t: on /clock(t) together with either /trial/event START(t) (reset the pole to the trial's
 initial angle) or /rln/action(t-1) (apply the force, one physics step), publish
-/cartpole/state(t), then the cart and pole drawn for a 3D view on /cartpole/markers(t)
-(clnn_ros.nodes.markers). Another simulator or a robot replaces this node by keeping that
-contract (docs/ENV_CONTRACT.md; the markers are optional there).
+/cartpole/state(t), then (at ticks that are multiples of marker_period_ticks) the cart and pole
+drawn for a 3D view on /cartpole/markers(t) (clnn_ros.nodes.markers). Another simulator or a
+robot replaces this node by keeping that contract (docs/ENV_CONTRACT.md; the markers are
+optional there).
 """
 
 from __future__ import annotations
@@ -24,10 +25,11 @@ from .markers import FRAME, CartPoleMarkers
 
 class EnvironmentNode(GraphNode):
     def __init__(self, **options):
-        # state subscribers: encoder, reward, trial manager; the markers have none in the graph
-        # (the recorder, one of extra_nodes, is waited for on both)
-        super().__init__("environment", {"state_pub": (CartPoleState, STATE, 3),
-                                         "markers_pub": (MarkerArray, MARKERS, 0)}, **options)
+        # state subscribers: encoder, reward, trial manager
+        super().__init__("environment", {"state_pub": (CartPoleState, STATE, 3)}, **options)
+        self.marker_period = self.settings["marker_period_ticks"]
+        if self.marker_period:  # no subscriber in the graph; extra_nodes' (the recorder) waited for
+            self.add_publisher("markers_pub", MarkerArray, MARKERS, 0)
         self.cartpole = CartPole(self.params)
         self.markers = CartPoleMarkers(self.params.pole_length, self.params.track_limit_m)
         self.tick = 0
@@ -107,8 +109,9 @@ class EnvironmentNode(GraphNode):
         state.failed, state.failure_reason = status != CONTINUE, FAILURE_REASONS[status]
         state.successful_steps = self.successful_steps
         self.state_pub.publish(self.stamp(state, self.tick, self.trial))
-        self.markers_pub.publish(self.markers.update(state.header.stamp, state.cart_position_m,
-                                                     state.pole_angle_deg))
+        if self.marker_period and self.tick % self.marker_period == 0:
+            self.markers_pub.publish(self.markers.update(
+                state.header.stamp, state.cart_position_m, state.pole_angle_deg))
         self.tick += 1
 
 
