@@ -10,8 +10,8 @@ Lockstep protocol (one tick = one physics step tau of sim time; every message ca
 
     trial_manager --clock(t) [+ trial/event START(t)]--> environment
     environment   --cartpole/state(t)--> encoder, reward, trial_manager
-                  [--cartpole/markers(t)--> a 3D view (Foxglove, RViz), the recorder: no node
-                   of the graph reads it]
+                  [--cartpole/markers(t)--> a 3D view (Foxglove, RViz), the recorder, at ticks
+                   that are multiples of marker_period_ticks: no node of the graph reads it]
     encoder       --rln/spikes(t)--> agent            reward --rln/reward(t)--> agent
     agent         --rln/action(t)--> environment (applied at tick t+1), trial_manager
     trial_manager, holding state(t) and action(t), publishes clock(t+1)
