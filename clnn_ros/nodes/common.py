@@ -104,15 +104,20 @@ class GraphNode(Node):
         self.finished = Future()
         self._expected = []
         for attribute, (msg_type, topic, subscribers) in publishers.items():
-            publisher = self.create_publisher(msg_type, topic, LOCKSTEP_QOS)
-            setattr(self, attribute, publisher)
-            self._expected.append((publisher, subscribers + len(self.extra_nodes)))
+            self.add_publisher(attribute, msg_type, topic, subscribers)
         self._ready_publisher = self.create_publisher(String, READY, READY_QOS)
         self._announced_at = -READY_REPEAT_S
         self._ready_timer = self.create_timer(0.02, self._announce_when_matched,
                                               clock=steady_clock())
         if self.listens_to_trial_events:
             self.subscribe(TrialEvent, TRIAL_EVENT, self.on_trial_event)
+
+    def add_publisher(self, attribute: str, msg_type, topic: str, subscribers: int) -> None:
+        """A publisher of the graph as self.<attribute>, waited for (readiness, the last
+        messages' delivery) like those given to __init__; before the node spins."""
+        publisher = self.create_publisher(msg_type, topic, LOCKSTEP_QOS)
+        setattr(self, attribute, publisher)
+        self._expected.append((publisher, subscribers + len(self.extra_nodes)))
 
     def publishers_matched(self) -> bool:
         """Has each publisher matched the subscribers the graph gives it?"""

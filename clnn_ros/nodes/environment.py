@@ -4,26 +4,34 @@
 
 Tick t: on /clock(t) together with either /trial/event START(t) (reset the pole to the trial's
 initial angle) or /rln/action(t-1) (apply the force, one physics step), publish
-/cartpole/state(t). Another simulator or a robot replaces this node by keeping that contract
-(docs/ENV_CONTRACT.md).
+/cartpole/state(t), then (at ticks that are multiples of marker_period_ticks) the cart and pole
+drawn for a 3D view on /cartpole/markers(t) (clnn_ros.nodes.markers). Another simulator or a
+robot replaces this node by keeping that contract (docs/ENV_CONTRACT.md; the markers are
+optional there).
 """
 
 from __future__ import annotations
 
 from clnn_ros_msgs.msg import Action, CartPoleState, TrialEvent
 from rosgraph_msgs.msg import Clock
+from visualization_msgs.msg import MarkerArray
 
 from ..core.physics import CONTINUE, CartPole
 from ..message_fields import FAILURE_REASONS
-from ..names import ACTION, CLOCK, STATE, TRIAL_EVENT
+from ..names import ACTION, CLOCK, MARKERS, STATE, TRIAL_EVENT
 from .common import GraphNode, node_main
+from .markers import FRAME, CartPoleMarkers
 
 
 class EnvironmentNode(GraphNode):
     def __init__(self, **options):
         # state subscribers: encoder, reward, trial manager
         super().__init__("environment", {"state_pub": (CartPoleState, STATE, 3)}, **options)
+        self.marker_period = self.settings["marker_period_ticks"]
+        if self.marker_period:  # no subscriber in the graph; extra_nodes' (the recorder) waited for
+            self.add_publisher("markers_pub", MarkerArray, MARKERS, 0)
         self.cartpole = CartPole(self.params)
+        self.markers = CartPoleMarkers(self.params.pole_length, self.params.track_limit_m)
         self.tick = 0
         self.trial = -1
         self.successful_steps = 0
@@ -31,6 +39,7 @@ class EnvironmentNode(GraphNode):
         self.over_tick = None  # tick of the last state of the trial that just ended
         self.pending = {}  # this tick's inputs by topic: /clock, and START or the action
         self.state_msg = CartPoleState()
+        self.state_msg.header.frame_id = FRAME  # the frame cart_position_m is measured in
         self.subscribe(Clock, CLOCK, self.on_clock)
         self.subscribe(Action, ACTION, self.on_action)
 
@@ -100,6 +109,9 @@ class EnvironmentNode(GraphNode):
         state.failed, state.failure_reason = status != CONTINUE, FAILURE_REASONS[status]
         state.successful_steps = self.successful_steps
         self.state_pub.publish(self.stamp(state, self.tick, self.trial))
+        if self.marker_period and self.tick % self.marker_period == 0:
+            self.markers_pub.publish(self.markers.update(
+                state.header.stamp, state.cart_position_m, state.pole_angle_deg))
         self.tick += 1
 
 

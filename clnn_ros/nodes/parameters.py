@@ -85,6 +85,9 @@ DESCRIPTIONS = {
                        None),
     "init_weights": ("'' the seed's; fig7, fig12, a weights .npy, or a checkpoint .npz to "
                      "resume", None),
+    "marker_period_ticks": ("the environment draws the cart-pole on cartpole/markers (a 3D "
+                            "view) at every tick that is a multiple of this; 0: never",
+                            (0, 2**32 - 1)),
 }
 
 

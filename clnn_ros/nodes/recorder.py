@@ -3,10 +3,12 @@
 
     python -m clnn_ros.nodes.recorder --ros-args -p bag_path:=NAME [--params-file P]
 
-It subscribes raw (the CDR bytes, never decoded) to clock, trial/event, cartpole/state, rln/spikes,
-rln/reward, rln/action and rln/weights (in its namespace) with a deep reader queue, and announces
-"recorder" on _graph/ready once each subscription sees its publisher (again every second until the
-first clock); run_all makes the trial manager wait for it (run setting extra_nodes), so the first
+It subscribes raw (the CDR bytes, never decoded) to clock, trial/event, cartpole/state,
+cartpole/markers, rln/spikes, rln/reward, rln/action and rln/weights (in its namespace) with a deep
+reader queue, and announces "recorder" on _graph/ready once each subscription but the optional
+cartpole/markers' (names.OPTIONAL: an environment of one's own may not publish it) sees its
+publisher (again every second until the first clock); run_all makes the trial manager wait for it
+and every publisher of the graph wait for its subscription (run setting extra_nodes), so the first
 tick is recorded. Every 20 ms it publishes on _recorder/progress the last tick it holds on every
 per-tick topic; the trial manager keeps the graph within RECORDER_WINDOW ticks of it, so a slow
 recorder loses nothing. Each message keeps its receive time (log_time) and its publisher's source
@@ -40,7 +42,7 @@ from clnn_ros_msgs.msg import TrialEvent
 from .. import bag, qos
 from ..core.params import ParamError, Params
 from ..files import describe_write_error
-from ..names import (CLOCK, PER_TICK, READY, RECORDED, RECORDER, TOPIC_TYPES,
+from ..names import (CLOCK, OPTIONAL, PER_TICK, READY, RECORDED, RECORDER, TOPIC_TYPES,
                      TRIAL_EVENT)
 from .common import (PROGRESS_QOS, READY_QOS, READY_REPEAT_S, WithMessageInfo, qos_profile,
                      ros_session, spin_until_finished, steady_clock)
@@ -107,6 +109,13 @@ class RecorderNode(Node):
                 resolved, type_name, bag.schema_text(type_name), qos, bag.type_hash(type_name))
         return channel
 
+    def _open_channels(self) -> None:
+        """A channel for every topic of the graph, even one without messages; for an optional
+        one (OPTIONAL) only while a publisher offers it (its first message opened it anyway)."""
+        for topic in TOPIC_TYPES:
+            if topic not in OPTIONAL or self.subscriptions_by_topic[topic].get_publisher_count():
+                self._channel(topic)
+
     def _receiver(self, topic: str):
         def receive(data: bytes, info: dict) -> None:
             if self.failure:
@@ -153,10 +162,10 @@ class RecorderNode(Node):
             self._ready_publisher = None
         if self._ready_publisher is not None and \
                 time.monotonic() - self._announced_at >= READY_REPEAT_S:
-            if all(s.get_publisher_count() >= 1 for s in self.subscriptions_by_topic.values()):
+            if all(s.get_publisher_count() >= 1 for topic, s in self.subscriptions_by_topic.items()
+                   if topic not in OPTIONAL):
                 try:
-                    for topic in TOPIC_TYPES:
-                        self._channel(topic)
+                    self._open_channels()
                 except OSError as error:
                     self.failure = describe_write_error(error, self.path)
                     self.finish(1)
@@ -185,8 +194,7 @@ class RecorderNode(Node):
         total = sum(self.counts.values())
         try:
             if not self.failure:
-                for topic in TOPIC_TYPES:
-                    self._channel(topic)
+                self._open_channels()
             self.bag.close(finalize=not self.failure)
         except OSError as error:
             self.failure = self.failure or describe_write_error(error, self.path)

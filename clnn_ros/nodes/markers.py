@@ -1,0 +1,64 @@
+"""The cart-pole drawn for a 3D view (Foxglove's 3D panel, RViz): a visualization_msgs MarkerArray
+of the track, the cart and the pole, in the frame `world` (x along the track, z up). Both viewers
+take a frame that no TF names as their fixed frame, so no transform is published.
+
+The drawing follows the state alone: the cart is a box centred at cart_position_m, the pole a
+cylinder of twice the pole's half-length hinged on the cart's top and tilted by pole_angle_deg
+about the y axis (positive leans toward +x, as in the state). The sizes of the track and the cart
+are only for the eye (the model's cart is a point mass on an unbounded line)."""
+
+from __future__ import annotations
+
+import math
+
+from builtin_interfaces.msg import Time
+from visualization_msgs.msg import Marker, MarkerArray
+
+FRAME = "world"
+NAMESPACE = "cartpole"
+# Marker ids: the same every tick, so each marker replaces its predecessor in the viewer.
+TRACK, CART, POLE = 0, 1, 2
+CART_SIZE_M = (0.3, 0.2, 0.15)  # x (along the track), y, z
+TRACK_THICKNESS_M = 0.02
+POLE_DIAMETER_M = 0.04
+COLORS = {TRACK: (0.5, 0.5, 0.5), CART: (0.2, 0.4, 0.8), POLE: (0.9, 0.5, 0.1)}  # RGB
+
+
+def _marker(marker_id: int, shape: int, scale: tuple[float, float, float]) -> Marker:
+    marker = Marker(ns=NAMESPACE, id=marker_id, type=shape, action=Marker.ADD)
+    marker.header.frame_id = FRAME
+    marker.scale.x, marker.scale.y, marker.scale.z = scale
+    marker.color.r, marker.color.g, marker.color.b = COLORS[marker_id]
+    marker.color.a = 1.0
+    marker.pose.orientation.w = 1.0
+    return marker
+
+
+class CartPoleMarkers:
+    """One MarkerArray, refilled for each state (publish copies it)."""
+
+    def __init__(self, pole_half_length_m: float, track_limit_m: float):
+        self.pole_half_length_m = pole_half_length_m
+        track = _marker(TRACK, Marker.CUBE,
+                        (2 * track_limit_m, CART_SIZE_M[1], TRACK_THICKNESS_M))
+        track.pose.position.z = -TRACK_THICKNESS_M / 2  # the cart runs on its top face
+        cart = _marker(CART, Marker.CUBE, CART_SIZE_M)
+        cart.pose.position.z = CART_SIZE_M[2] / 2
+        pole = _marker(POLE, Marker.CYLINDER,
+                       (POLE_DIAMETER_M, POLE_DIAMETER_M, 2 * pole_half_length_m))
+        self.array = MarkerArray(markers=[track, cart, pole])
+
+    def update(self, stamp: Time, cart_position_m: float, pole_angle_deg: float) -> MarkerArray:
+        """The markers of one state, stamped with its header's stamp."""
+        track, cart, pole = self.array.markers
+        for marker in (track, cart, pole):
+            marker.header.stamp.sec, marker.header.stamp.nanosec = stamp.sec, stamp.nanosec
+        cart.pose.position.x = cart_position_m
+        # A cylinder's axis is its local z: turn it by the pole angle about y, centre it half
+        # a pole length from the hinge along the tilted axis.
+        theta = math.radians(pole_angle_deg)
+        pole.pose.position.x = cart_position_m + self.pole_half_length_m * math.sin(theta)
+        pole.pose.position.z = CART_SIZE_M[2] + self.pole_half_length_m * math.cos(theta)
+        pole.pose.orientation.y, pole.pose.orientation.w = math.sin(theta / 2), \
+            math.cos(theta / 2)
+        return self.array
