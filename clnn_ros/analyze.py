@@ -3,7 +3,7 @@
     python -m clnn_ros.analyze BAG [--out DIR] [--trial N] [--animate N] [--salvage]
 
 BAG: a bag directory (as run_all records it: DIR/metadata.yaml, DIR/DIR_0.mcap) or its .mcap file.
-Writes into DIR (default: the bag's name without .mcap, plus _analysis):
+Writes into DIR (default: <bag>_analysis, beside the bag directory or the .mcap file):
     trials.csv           seed,trial,initial_angle_deg,steps,end_reason (as run_all writes it)
     learning_curve.png   successful steps per trial, coloured by how each trial ended
     traces.png           the chosen trial against the tick: cart position and velocity, pole
@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .bag import BagError, Decoder, iter_raw, mcap_file, open_bag
+from .bag import METADATA_FILE, BagError, Decoder, iter_raw, mcap_file, open_bag
 from .cli import OneLineArgumentParser
 from .core.params import ParamError, Params, params_from_strings
 from .files import cannot_create, describe_write_error
@@ -470,6 +470,17 @@ def gif_progress(name: str):
     return show
 
 
+def default_out(bag_path: Path) -> Path:
+    """<bag>_analysis beside the bag directory (for DIR/DIR_0.mcap too: beside DIR, never inside
+    the bag), or beside a lone .mcap file."""
+    base = bag_path
+    if bag_path.is_file() and (bag_path.parent / METADATA_FILE).is_file():
+        base = bag_path.parent
+    elif bag_path.suffix == ".mcap":
+        base = bag_path.with_suffix("")
+    return base.with_name(base.name + "_analysis")
+
+
 def main(argv=None) -> int:
     parser = OneLineArgumentParser(prog="python -m clnn_ros.analyze", name="analyze",
                                    description=__doc__.split("\n\n")[0])
@@ -482,7 +493,7 @@ def main(argv=None) -> int:
     parser.add_argument("--salvage", action="store_true",
                         help="read an unfinished bag (recorder killed) up to its last complete chunk")
     args = parser.parse_args(argv)
-    out = args.out or args.bag.with_name(args.bag.stem + "_analysis")
+    out = args.out or default_out(args.bag)
     try:
         check_output(out)
         result = analyze(args.bag, out, args.trial, args.salvage, args.animate,

@@ -216,7 +216,7 @@ class BagWriter:
     def add_metadata(self, name: str, data: dict) -> None:
         """A metadata record, on disk at once."""
         self.writer.add_metadata(name, data)
-        self.writer.flush()
+        self.close_chunk()
 
     def add_topic(self, name: str, type_name: str, schema: str, qos: list[dict],
                   type_description_hash: str) -> int:
@@ -338,6 +338,13 @@ def mcap_file(path) -> Path:
     return path
 
 
+def check_magic(stream, path: Path) -> None:
+    """BagError unless the stream starts as an MCAP file does; it is left at its start."""
+    if stream.read(8) != MCAP_MAGIC:
+        raise BagError(f"{path}: not an MCAP file")
+    stream.seek(0)
+
+
 def open_bag(path, salvage: bool = False):
     """Check that `path` (a bag directory or .mcap file) is a complete MCAP recording and return
     (reader, stream). A truncated file (no footer/summary: the recorder was killed) is refused
@@ -348,9 +355,7 @@ def open_bag(path, salvage: bool = False):
     path = mcap_file(path)
     stream = open(path, "rb")
     try:
-        if stream.read(8) != MCAP_MAGIC:
-            raise BagError(f"{path}: not an MCAP file")
-        stream.seek(0)
+        check_magic(stream, path)
         try:
             reader = SeekingReader(stream)
             summary = reader.get_summary()
@@ -427,9 +432,7 @@ def repair(source, out=None) -> tuple[Path, int, bool]:
     if out.exists():
         raise BagError(f"{out} exists: give another --out")
     with open(source_file, "rb") as stream:
-        if stream.read(8) != MCAP_MAGIC:
-            raise BagError(f"{source_file}: not an MCAP file")
-        stream.seek(0)
+        check_magic(stream, source_file)
         writer, complete = None, False
         schemas, channels = {}, {}  # the source's ids -> its schema records, the copy's channels
         try:

@@ -21,7 +21,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from .core import encoder, physics, random_stream, rln
+from .core import encoder, params, physics, random_stream, rln
 from .core.encoder import Encoder, encode_active
 from .core.episode import angle_grid, seed_setup
 from .core.params import Params
@@ -113,8 +113,9 @@ def _drop_stale_cache() -> None:
     functions are compiled into it (a documented limitation, numba/numba#1833): after a change
     to one of those, the cached engine would run the old rule. A digest of them beside the
     cache drops it then (through the dispatchers' cache objects: numba has no public call)."""
+    # params: the option indices (TIE_BREAKS) are compiled in as constants
     core_sources = b"".join(Path(m.__file__).read_bytes() for m in (rln, physics, encoder,
-                                                                    random_stream))
+                                                                    random_stream, params))
     digest = hashlib.sha256(core_sources).hexdigest()
     stamp = Path(_run_many._cache._cache_path) / "batch.core_sources.sha256"
     try:

@@ -61,7 +61,7 @@ def plan(arguments: dict[str, str], workdir: Path) -> list[NodeLaunch]:
     values = run_all.build_parameters(args)
     values["out_dir"] = str(args.out.resolve()) if args.out else ""
     namespace = run_all.graph_namespace(args)
-    remappings = (("/clock", f"{namespace}/clock"),) if namespace != "/" else ()
+    remappings = tuple(run_all.clock_remappings(namespace))
     nodes = []
     if not args.no_record:
         bag_path = (args.bag or run_all.default_bag_path(args.out)).resolve()

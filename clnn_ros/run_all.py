@@ -51,6 +51,7 @@ DEMO = dict(seed=0, trials=20, nsv=1)
 ENVIRONMENTS = {"cartpole": ("clnn_ros.nodes.environment", "EnvironmentNode"),
                 "gymnasium": ("clnn_ros.nodes.gymnasium_env", "GymnasiumEnvironmentNode"),
                 "external": None}
+GYMNASIUM_TAU = 0.02  # s: the step of gymnasium's CartPole-v1, which --env gymnasium runs
 # Run settings that run_all sets itself: a value given would be overwritten (out_dir) or make
 # the graph wait for a participant that never comes (extra_nodes, the recorder's name).
 RUN_ALL_SETS = {"out_dir": "--out", "extra_nodes": "--bag / --no-record",
@@ -201,6 +202,9 @@ def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
             str(Path(args.init_weights).resolve())
     model = {k: v for k, v in values.items() if k not in RUN_SETTINGS}
     params = params_from_strings(model)  # raises ParamError with one line
+    if args.env == "gymnasium" and args.env_node is None and params.tau != GYMNASIUM_TAU:
+        raise ParamError(f"--env gymnasium steps gymnasium's tau of {GYMNASIUM_TAU:g} s, got "
+                         f"tau={params.tau:g}")
     if args.velocity_edge is not None and "cart_velocity" not in params.state_vars:
         raise ParamError(f"--velocity-edge needs cart_velocity among the state variables "
                          f"(this run encodes {','.join(params.state_vars)})")
@@ -229,12 +233,19 @@ def write_params(path: Path, values: dict) -> Path:
     return path
 
 
+def clock_remappings(namespace: str) -> list[tuple[str, str]]:
+    """The sim clock moved into the namespace (use_sim_time subscribes to the absolute /clock)."""
+    return [("/clock", f"{namespace}/clock")] if namespace != "/" else []
+
+
 def ros_arguments(params_file: Path, namespace: str) -> list[str]:
     """The --ros-args of every node of the run: the parameters, and the namespace with the sim
-    clock moved into it (use_sim_time subscribes to the absolute /clock)."""
+    clock moved into it."""
     arguments = ["--ros-args", "--params-file", str(params_file), "--log-level", "warn"]
     if namespace != "/":
-        arguments += ["-r", f"__ns:={namespace}", "-r", f"/clock:={namespace}/clock"]
+        arguments += ["-r", f"__ns:={namespace}"]
+    for old, new in clock_remappings(namespace):
+        arguments += ["-r", f"{old}:={new}"]
     return arguments
 
 
@@ -326,7 +337,8 @@ def run_composed(values: dict, environment: str | None, namespace: str,
     nodes = []
     try:
         options = dict(overrides=values, namespace=None if namespace == "/" else namespace,
-                       cli_args=["--ros-args", "-r", f"/clock:={namespace}/clock"]
+                       cli_args=["--ros-args", *(arg for old, new in clock_remappings(namespace)
+                                                 for arg in ("-r", f"{old}:={new}"))]
                        if namespace != "/" else None)
         for cls in classes:
             nodes.append(cls(**options))
@@ -388,11 +400,6 @@ def main(argv=None) -> int:
         values = build_parameters(args, checkpoint)
     except ParamError as error:  # a CheckpointError too
         print(f"run_all: error: {error}", file=sys.stderr)
-        return 2
-    if args.env == "gymnasium" and args.env_node is None and \
-            params_from_strings({"tau": values.get("tau", 0.02)}).tau != 0.02:
-        print("run_all: error: --env gymnasium steps gymnasium's tau of 0.02 s, got tau="
-              f"{values['tau']}", file=sys.stderr)
         return 2
     namespace = graph_namespace(args)
     environment = None if args.env == "external" else args.env
@@ -472,6 +479,9 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
             bag_path.rmdir()  # empty: created here to check it could be; nothing was recorded
         print(f"run_all: bag {bag_path}" if bag_path.exists() else
               f"run_all: nothing recorded, no bag", flush=True)
+        if bag_path.exists() and not (bag_path / bag.METADATA_FILE).is_file():
+            say(f"run_all: warning: the bag was not finished (its recorder was stopped): "
+                f"python -m clnn_ros.bag repair {bag_path}")
     if failed:
         return 1
     if status in (128 + signal.SIGINT, 128 + signal.SIGTERM):

@@ -68,9 +68,10 @@ def separate_runs(runs: int, episode: list[str], workdir: Path) -> list[str]:
             print(f"process run {run + 1} stderr:\n{result.stderr}", file=sys.stderr, flush=True)
         if not (out / "bag" / "metadata.yaml").is_file():
             problems.append(f"run {run + 1} left no finished bag")
-    if forced:  # handled (terminated, its files removed), but worth knowing
+    if forced:  # handled (stopped, its files removed), but worth knowing
         print(f"process runs {forced}: a node did not exit within run_all's grace period and was "
-              f"terminated", flush=True)
+              f"terminated (or, hung in native code, killed; run_all's warning says which)",
+              flush=True)
     return problems
 
 

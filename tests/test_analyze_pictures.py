@@ -272,3 +272,19 @@ def test_a_run_with_its_own_environment_node_says_so(ros_env, tmp_path):
     assert f"* environment: your own node: `{command}` (`run_all --env-node`)" in summary
     assert "* physics: the node's own (the graph's parameter physics=paper" in summary
     assert "physics: `paper`" not in summary
+
+
+@pytest.mark.parametrize("given, expected", [
+    ("runs/bag", "runs/bag_analysis"),
+    ("runs/my.bag", "runs/my.bag_analysis"),  # a directory: its whole name
+    ("runs/bag/bag_0.mcap", "runs/bag_analysis"),  # beside the bag, never inside it
+    ("runs/lone.mcap", "runs/lone_analysis"),
+])
+def test_default_out_is_beside_the_bag(tmp_path, given, expected):
+    from clnn_ros.analyze import default_out
+    bag_dir = tmp_path / "runs" / "bag"
+    bag_dir.mkdir(parents=True)
+    (bag_dir / "metadata.yaml").write_text("")
+    (bag_dir / "bag_0.mcap").write_bytes(b"")
+    (tmp_path / "runs" / "my.bag").mkdir()
+    assert default_out(tmp_path / given) == tmp_path / expected

@@ -49,7 +49,9 @@ RUN_ALL_CASES = [  # (arguments, what the one error line says)
     # command line: model parameters
     (["--trials", "0"], "trials must be a positive integer below 2**31, got 0"),
     (["--max-steps", "0"], "max_steps must be a positive integer below 2**31, got 0"),
-    (["--nsv", "3"], "nsv must be one of 1, 2"),
+    (["--nsv", "5"], "nsv must be 1, 2, 3 or 4"),
+    (["--state-vars", "pole_angle,pole_tilt"], "state_vars: unknown 'pole_tilt'"),
+    (["--nsv", "2", "--state-vars", "pole_angle"], "nsv (2) must be the number of state_vars"),
     (["--physics", "quantum"], "physics must be one of 'paper', 'correct', got 'quantum'"),
     (["--option", "sigma=-1"], "sigma must be a positive integer below 2**31, got -1"),
     (["--option", "wmax=9"], "unknown parameter 'wmax'; known: angle_edges_deg"),
@@ -63,7 +65,7 @@ RUN_ALL_CASES = [  # (arguments, what the one error line says)
     (["--option", "angle_edges_deg=[1, 0]"], "angle_edges_deg must be strictly increasing"),
     (["--option", "angle_edges_deg=-20,0"], "angle_edges_deg must lie inside +-angle_limit_deg"),
     (["--option", "w_base=7.999"], "w_base + w_range (8.00681) must not exceed w_max (8)"),
-    (["--nsv", "1", "--velocity-edge", "0.3"], "--velocity-edge needs --nsv 2"),
+    (["--nsv", "1", "--velocity-edge", "0.3"], "--velocity-edge needs cart_velocity among"),
     (["--nsv", "2", "--velocity-edge", "-1"], "velocity_edge must be > 0, got -1.0"),
     (["--env", "gymnasium", "--option", "tau=0.01"], "--env gymnasium steps gymnasium's tau"),
     # command line: run settings, paths, commands
@@ -123,7 +125,7 @@ NODE_CASES = [  # (node, its arguments after --ros-args, what the one error line
     ("agent", ["-p", "sigma"], "Couldn't parse parameter override rule: '-p sigma'"),
     ("agent", ["-p", "seed:=1.5"], "seed must be an integer from 0 to 2**32-1, got 1.5"),
     ("encoder", ["-p", "angle_edges_deg:=[-6,-1.5,0]"], "Sequence should be of same type"),
-    ("encoder", ["-p", "nsv:=3"], "nsv must be one of 1, 2"),
+    ("encoder", ["-p", "nsv:=5"], "nsv must be 1, 2, 3 or 4"),
     ("reward", ["--params-file", "missing.yaml"], "cannot read params file missing.yaml"),
     ("reward", ["--params-file", "malformed.yaml"], "malformed.yaml is not valid YAML"),
     ("reward", ["--params-file", "text.yaml"], "must map node names to 'ros__parameters:'"),

@@ -236,7 +236,7 @@ def test_ctrl_c_across_the_link_removes_everything(base_env, tmp_path):
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--nsv", "3"], "nsv must be one of 1, 2"),
+    (["--nsv", "5"], "nsv must be 1, 2, 3 or 4"),
     (["--seed", "-1"], "seed must be an integer from 0 to 2**32-1"),
     (["--discovery", "carrier-pigeon"], "argument --discovery: invalid choice"),
 ])

@@ -70,6 +70,29 @@ REFUSAL_LOG_S = 1.0  # at most one refusal line per topic per second (a flood fi
 EXIT_WITH_STDIN = "CLNN_ROS_EXIT_WITH_STDIN"
 
 
+class ReadyAnnouncer:
+    """A participant's readiness on READY: announced once `is_ready()`, and again every
+    READY_REPEAT_S until `is_running()` (a trial manager that missed the one announcement
+    would wait forever)."""
+
+    def __init__(self, node: Node, name: str, is_ready: Callable[[], bool],
+                 is_running: Callable[[], bool]):
+        self._publisher = node.create_publisher(String, READY, READY_QOS)
+        self._name, self._is_ready, self._is_running = name, is_ready, is_running
+        self._announced_at = -READY_REPEAT_S
+        self.done = False
+
+    def poll(self) -> None:
+        """Call often (a steady timer): announces when due."""
+        if self.done or self._is_running():
+            self.done = True
+            return
+        now = time.monotonic()
+        if now - self._announced_at >= READY_REPEAT_S and self._is_ready():
+            self._publisher.publish(String(data=self._name))
+            self._announced_at = now
+
+
 def steady_clock() -> Clock:
     """For timers that must run before and between ticks (a node with use_sim_time's default
     clock stands still until /clock moves)."""
@@ -105,8 +128,8 @@ class GraphNode(Node):
         self._expected = []
         for attribute, (msg_type, topic, subscribers) in publishers.items():
             self.add_publisher(attribute, msg_type, topic, subscribers)
-        self._ready_publisher = self.create_publisher(String, READY, READY_QOS)
-        self._announced_at = -READY_REPEAT_S
+        self._ready = ReadyAnnouncer(self, self.get_name(), self.publishers_matched,
+                                     lambda: self.current_tick() > 0)
         self._ready_timer = self.create_timer(0.02, self._announce_when_matched,
                                               clock=steady_clock())
         if self.listens_to_trial_events:
@@ -124,15 +147,10 @@ class GraphNode(Node):
         return all(p.get_subscription_count() >= n for p, n in self._expected)
 
     def _announce_when_matched(self) -> None:
-        """Announce once the publishers have matched, and again every READY_REPEAT_S until the
-        graph runs: a trial manager that missed the one announcement would wait forever."""
-        if self.current_tick() > 0:
+        """Ready once the publishers have matched, until the graph runs (ReadyAnnouncer)."""
+        self._ready.poll()
+        if self._ready.done:
             self._ready_timer.cancel()
-            return
-        now = time.monotonic()
-        if now - self._announced_at >= READY_REPEAT_S and self.publishers_matched():
-            self._ready_publisher.publish(String(data=self.get_name()))
-            self._announced_at = now
 
     def subscribe(self, msg_type, topic: str, callback: Callable) -> None:
         """Subscribe to an input of the graph. A message goes to `callback` only if it keeps the

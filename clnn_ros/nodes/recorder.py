@@ -35,17 +35,16 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
 from rclpy.task import Future
-from std_msgs.msg import String, UInt64
+from std_msgs.msg import UInt64
 
 from clnn_ros_msgs.msg import TrialEvent
 
 from .. import bag, qos
 from ..core.params import ParamError, Params
 from ..files import describe_write_error
-from ..names import (CLOCK, OPTIONAL, PER_TICK, READY, RECORDED, RECORDER, TOPIC_TYPES,
-                     TRIAL_EVENT)
-from .common import (PROGRESS_QOS, READY_QOS, READY_REPEAT_S, WithMessageInfo, qos_profile,
-                     ros_session, spin_until_finished, steady_clock)
+from ..names import CLOCK, OPTIONAL, PER_TICK, RECORDED, RECORDER, TOPIC_TYPES, TRIAL_EVENT
+from .common import (PROGRESS_QOS, ReadyAnnouncer, WithMessageInfo, qos_profile, ros_session,
+                     spin_until_finished, steady_clock)
 from .parameters import declare_parameters
 
 RECORD_QOS = qos_profile(qos.RECORD)
@@ -91,8 +90,9 @@ class RecorderNode(Node):
         self.finished = Future()
         self.episode_end_at = None
         self.last_message_at = time.monotonic()
-        self._ready_publisher = self.create_publisher(String, READY, READY_QOS)
-        self._announced_at = -READY_REPEAT_S
+        # the graph runs once a clock was recorded: no more announcements
+        self._ready = ReadyAnnouncer(self, RECORDER, self._ready_to_record,
+                                     lambda: CLOCK in self.last_tick)
         self._progress_publisher = self.create_publisher(UInt64, RECORDED, PROGRESS_QOS)
         self._progress = UInt64()
         self._timer = self.create_timer(0.02, self._poll, clock=steady_clock())
@@ -116,6 +116,19 @@ class RecorderNode(Node):
             if topic not in OPTIONAL or self.subscriptions_by_topic[topic].get_publisher_count():
                 self._channel(topic)
 
+    def _ready_to_record(self) -> bool:
+        """Ready once every topic the graph must have has a publisher: its channels are opened
+        first (OSError if the bag cannot be written)."""
+        if not all(s.get_publisher_count() >= 1 for topic, s in self.subscriptions_by_topic.items()
+                   if topic not in OPTIONAL):
+            return False
+        self._open_channels()
+        return True
+
+    def _write_failed(self, error: OSError) -> None:
+        self.failure = describe_write_error(error, self.path)
+        self.finish(1)
+
     def _receiver(self, topic: str):
         def receive(data: bytes, info: dict) -> None:
             if self.failure:
@@ -123,12 +136,10 @@ class RecorderNode(Node):
             self.last_message_at = time.monotonic()
             stamp = bag.stamp_ns(data)
             try:
-                channel = self.channels.get(topic) or self._channel(topic)
-                self.bag.write(channel, info["received_timestamp"], info["source_timestamp"],
-                               data, self.counts[topic])
+                self.bag.write(self._channel(topic), info["received_timestamp"],
+                               info["source_timestamp"], data, self.counts[topic])
             except OSError as error:  # the graph ends: a bag with holes would be lost silently
-                self.failure = describe_write_error(error, self.path)
-                self.finish(1)
+                self._write_failed(error)
                 return
             if topic in PER_TICK:
                 previous = self.last_tick.get(topic)
@@ -154,24 +165,10 @@ class RecorderNode(Node):
         if not self.failure:
             try:
                 self.bag.flush_if_due()
+                self._ready.poll()
             except OSError as error:
-                self.failure = describe_write_error(error, self.path)
-                self.finish(1)
+                self._write_failed(error)
                 return
-        if CLOCK in self.last_tick:  # the graph runs: no more announcements (see GraphNode)
-            self._ready_publisher = None
-        if self._ready_publisher is not None and \
-                time.monotonic() - self._announced_at >= READY_REPEAT_S:
-            if all(s.get_publisher_count() >= 1 for topic, s in self.subscriptions_by_topic.items()
-                   if topic not in OPTIONAL):
-                try:
-                    self._open_channels()
-                except OSError as error:
-                    self.failure = describe_write_error(error, self.path)
-                    self.finish(1)
-                    return
-                self._ready_publisher.publish(String(data=RECORDER))
-                self._announced_at = time.monotonic()
         if len(self.last_tick) == len(PER_TICK):  # sent each time: a lost one is replaced
             self._progress.data = min(self.last_tick.values()) // self.tau_ns
             self._progress_publisher.publish(self._progress)

@@ -38,7 +38,7 @@ def generate_launch_description():
         *(DeclareLaunchArgument(name, default_value="", description=description)
           for name, (_, description) in ARGUMENTS.items()),
         DeclareLaunchArgument(RECORD, default_value="true",
-                              description="record every topic into an MCAP file (run_all "
-                                          "--no-record: false)"),
+                              description="record every topic into a rosbag2 bag directory "
+                                          "(run_all --no-record: false)"),
         OpaqueFunction(function=graph_nodes),
     ])
