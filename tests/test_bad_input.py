@@ -52,7 +52,7 @@ RUN_ALL_CASES = [  # (arguments, what the one error line says)
     (["--nsv", "5"], "nsv must be 1, 2, 3 or 4"),
     (["--state-vars", "pole_angle,pole_tilt"], "state_vars: unknown 'pole_tilt'"),
     (["--nsv", "2", "--state-vars", "pole_angle"], "nsv (2) must be the number of state_vars"),
-    (["--physics", "quantum"], "physics must be one of 'paper', 'correct', got 'quantum'"),
+    (["--physics", "quantum"], "physics must be one of 'paper', 'correct', 'integration_slip', got 'quantum'"),
     (["--option", "sigma=-1"], "sigma must be a positive integer below 2**31, got -1"),
     (["--option", "wmax=9"], "unknown parameter 'wmax'; known: angle_edges_deg"),
     (["--option", "sigma"], "--option expects KEY=VALUE, got 'sigma'"),
