@@ -290,10 +290,13 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
         report_failure(failure)
     nodes = [n for n in NODES if n in supervisor.children]
     # After a normal end every node has its EPISODE_END; after a failure a node that was still
-    # starting may have missed it: they are told with SIGINT.
-    warn_forced(supervisor.stop(nodes, SHUTDOWN_GRACE_S,
-                                interrupt=bool(interrupted or failure or status or
-                                               manager.returncode)))
+    # starting may have missed it: they are told with SIGINT. One still importing on a loaded
+    # machine may take longer than the grace to get there: after a failure, its termination is
+    # part of ending the run, not a node that missed its end.
+    forced = supervisor.stop(nodes, SHUTDOWN_GRACE_S,
+                             interrupt=bool(interrupted or failure or status or manager.returncode))
+    warn_forced([(name, how) for name, how in forced
+                 if how != "terminated" or failure is None])
     status = manager.returncode if status is None else status
     if interrupted:
         return 128 + interrupted[0], False
@@ -445,7 +448,7 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
             print(f"run_all: waiting for an environment node in namespace {namespace} (at most "
                   f"{values.get('stall_timeout_s', RUN_SETTINGS['stall_timeout_s']):g} s once the "
                   f"rest is ready)", flush=True)
-        failed = False
+        failed = recorder_forced = False
         if args.composed:
             status, reason = run_composed(values, environment, namespace, interrupted)
         else:
@@ -458,7 +461,7 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
                 report_failure(recorder)  # it failed first: the graph then stopped
                 failed = True
             episode_ended = status in (0, 1) and not failed
-            forced = stop_recorder(supervisor, episode_ended)
+            forced = recorder_forced = stop_recorder(supervisor, episode_ended)
             # Told to stop while still starting (before its handler was set), it dies of the
             # SIGINT: as told, nothing recorded.
             stopped_as_told = (0, 128 + signal.SIGINT) + \
@@ -479,8 +482,9 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
             bag_path.rmdir()  # empty: created here to check it could be; nothing was recorded
         print(f"run_all: bag {bag_path}" if bag_path.exists() else
               f"run_all: nothing recorded, no bag", flush=True)
-        if bag_path.exists() and not (bag_path / bag.METADATA_FILE).is_file():
-            say(f"run_all: warning: the bag was not finished (its recorder was stopped): "
+        if recorder_forced and bag_path.exists() and \
+                not (bag_path / bag.METADATA_FILE).is_file():  # else its own lines said so
+            say(f"run_all: warning: the recorder had to be stopped before it finished the bag: "
                 f"python -m clnn_ros.bag repair {bag_path}")
     if failed:
         return 1
