@@ -45,6 +45,16 @@ END_REASONS = {0: "max_steps", 1: "pole_angle", 2: "cart_position"}  # physics s
 # ------------------------------------------------------------------------------------------------
 # Helpers
 # ------------------------------------------------------------------------------------------------
+class SeedMeans:
+    """For a result that holds `steps`, (seeds, trials): each seed's mean successful steps."""
+
+    steps: np.ndarray
+
+    @property
+    def seed_means(self) -> np.ndarray:
+        return self.steps.mean(axis=1)
+
+
 def parse_seeds(spec: str) -> list[int]:
     """'0-31', '0,3,5' or '0-3,7' -> sorted seeds; ValueError with one line on bad input."""
     seeds: list[int] = []

@@ -11,7 +11,7 @@ import numpy as np
 from ..batch import run_batch
 from ..core.params import Params
 from .calibration import Calibration
-from .common import STUCK_BELOW, TRIALS, md_table, progress, stuck, write_csv
+from .common import STUCK_BELOW, TRIALS, SeedMeans, md_table, progress, stuck, write_csv
 
 # ------------------------------------------------------------------------------------------------
 # Settings
@@ -23,14 +23,10 @@ LATE_TRIALS = 64  # "late": the episode's last trials, where exploration's own c
 
 
 @dataclass
-class ExploreRun:
+class ExploreRun(SeedMeans):
     label: str  # encoding, e.g. "1 SV"
     explore: float
     steps: np.ndarray  # (seeds, trials)
-
-    @property
-    def seed_means(self) -> np.ndarray:
-        return self.steps.mean(axis=1)
 
     @property
     def late_means(self) -> np.ndarray:

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..batch import run_batch
 from ..core.params import ParamError, Params, params_from_strings
-from .common import STUCK_BELOW, TRIALS, md_table, progress, stuck, write_csv
+from .common import STUCK_BELOW, TRIALS, SeedMeans, md_table, progress, stuck, write_csv
 
 # ------------------------------------------------------------------------------------------------
 # Settings
@@ -27,15 +27,11 @@ INSENSITIVE_WITHIN = 0.25
 
 
 @dataclass
-class SweepRun:
+class SweepRun(SeedMeans):
     values: dict  # the swept parameters' values of this configuration
     params: Params
     seeds: np.ndarray
     steps: np.ndarray  # (seeds, trials)
-
-    @property
-    def seed_means(self) -> np.ndarray:
-        return self.steps.mean(axis=1)
 
     @property
     def tag(self) -> str:

@@ -11,7 +11,8 @@ import numpy as np
 from ..batch import run_batch
 from ..core.params import Params
 from .calibration import Calibration
-from .common import MAX_STEPS, STUCK_BELOW, TRIALS, md_table, progress, stuck, write_csv
+from .common import (MAX_STEPS, STUCK_BELOW, TRIALS, SeedMeans, md_table, progress, stuck,
+                     write_csv)
 
 # ------------------------------------------------------------------------------------------------
 # Settings
@@ -32,13 +33,9 @@ ENCODINGS = (
 
 
 @dataclass
-class EncodingRun:
+class EncodingRun(SeedMeans):
     params: Params
     steps: np.ndarray  # (seeds, trials)
-
-    @property
-    def seed_means(self) -> np.ndarray:
-        return self.steps.mean(axis=1)
 
     @property
     def late_capped(self) -> float:
