@@ -461,12 +461,12 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
                 report_failure(recorder)  # it failed first: the graph then stopped
                 failed = True
             episode_ended = status in (0, 1) and not failed
-            forced = recorder_forced = stop_recorder(supervisor, episode_ended)
+            recorder_forced = stop_recorder(supervisor, episode_ended)
             # Told to stop while still starting (before its handler was set), it dies of the
             # SIGINT: as told, nothing recorded.
             stopped_as_told = (0, 128 + signal.SIGINT) + \
                 (() if episode_ended else (-signal.SIGINT,))
-            if not failed and not interrupted and not forced and \
+            if not failed and not interrupted and not recorder_forced and \
                     recorder.returncode not in stopped_as_told:
                 report_failure(recorder)
                 failed = True
