@@ -17,8 +17,9 @@ index, metadata.yaml) on EPISODE_END (a normal end, or a stall the trial manager
 Ctrl-C, on SIGTERM and when run_all goes away. A chunk goes to the file half a second after its
 first message (bag.CHUNK_SECONDS), so a SIGKILL loses at most that; `python -m clnn_ros.bag repair`
 then makes a finished copy. A bag that holds no message is removed. The run's parameters are stored
-in the bag's `clnn_ros` metadata record, with the environment node (parameter `environment`). Exit status 0, 130/143 after a signal, 2 for bad
-parameters, 1 if the bag cannot be written (a full disk: one line).
+in the bag's `clnn_ros` metadata record, with the environment node (parameter `environment`).
+Exit status 0, 130/143 after a signal, 2 for bad parameters, 1 if the bag cannot be written (a
+full disk: one line).
 """
 
 from __future__ import annotations
