@@ -28,7 +28,7 @@ from .calibration import calibrate, print_calibration, write_calibration
 from .common import DEFAULT_SEEDS, LITERAL_EDGE, TRIALS, parse_seeds, stuck
 from .figures import figures_markdown, make_figures
 from .gymnasium_physics import SELECT_SEEDS, gymnasium_markdown, gymnasium_study, write_gymnasium
-from .learning import learn_run, paper_runs, print_seed_means, write_learn_outputs
+from .learning import encodings, learn_run, paper_runs, print_seed_means, write_learn_outputs
 from .open_choices import OPTION_SEEDS, open_choices, open_choices_markdown, write_open_choices
 from .local_optima import (LOCAL_OPTIMA_SEEDS, local_optima, local_optima_markdown,
                            plot_local_optima, write_local_optima)
@@ -117,11 +117,8 @@ def cmd_all(args) -> None:
     files.append(write_physics(physics, data))
     options = open_choices(option_seeds, cal)
     files += write_open_choices(options, data)
-    bases = [("1 SV", Params(nsv=1, trials=TRIALS)),
-             (f"2 SV, edge {cal.best_edge:g}", Params(nsv=2, trials=TRIALS,
-                                                      velocity_edge=cal.best_edge))]
     sensitivity_seeds, optima_seeds = parse_seeds(SENSITIVITY_SEEDS), parse_seeds(LOCAL_OPTIMA_SEEDS)
-    sens = sensitivity(bases, sensitivity_seeds)
+    sens = sensitivity(encodings(cal), sensitivity_seeds)
     files.append(write_sensitivity(sens, data))
     optima = local_optima(optima_seeds, cal)
     files.append(write_local_optima(optima, data))

@@ -75,6 +75,14 @@ def print_seed_means(run: Run) -> None:
     print(f"overall mean {means.mean():.1f}; seeds stuck below {STUCK_BELOW}: {stuck(means)}")
 
 
+def encodings(cal: Calibration) -> list[tuple[str, Params]]:
+    """(label, params) of the two encodings the studies beyond the paper use: 1 SV, and 2 SV at
+    the calibration scan's best edge."""
+    return [("1 SV", Params(nsv=1, trials=TRIALS)),
+            (f"2 SV, edge {cal.best_edge:g}", Params(nsv=2, trials=TRIALS,
+                                                     velocity_edge=cal.best_edge))]
+
+
 def paper_runs(seeds, cal: Calibration) -> PaperRuns:
     """The paper's runs: 1 SV, 2 SV at the literal edge, 2 SV at the scan's best edge."""
     edge = cal.best_edge

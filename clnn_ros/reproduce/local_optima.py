@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 
 from ..batch import run_batch
-from ..core.params import Params
 from .calibration import Calibration
 from .common import STUCK_BELOW, TRIALS, SeedMeans, md_table, progress, stuck, write_csv
+from .learning import encodings
 
 # ------------------------------------------------------------------------------------------------
 # Settings
@@ -31,12 +31,6 @@ class ExploreRun(SeedMeans):
     @property
     def late_means(self) -> np.ndarray:
         return self.steps[:, -LATE_TRIALS:].mean(axis=1)
-
-
-def encodings(cal: Calibration) -> list[tuple[str, Params]]:
-    return [("1 SV", Params(nsv=1, trials=TRIALS)),
-            (f"2 SV, edge {cal.best_edge:g}", Params(nsv=2, trials=TRIALS,
-                                                     velocity_edge=cal.best_edge))]
 
 
 def local_optima(seeds, cal: Calibration) -> list[ExploreRun]:
