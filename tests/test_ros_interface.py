@@ -37,7 +37,8 @@ def call(node, service_type, name: str, request, timeout: float = 20.0, resend_s
     """One answer to an idempotent request. Sent again every `resend_s`: rmw_fastrtps drops a
     response (rclpy's "failed to send response (timeout)") when the server's response writer has
     not yet matched the new client's reader within 100 ms, which wait_for_service cannot see
-    from the client's side; seen once beside a suite run (2 cores)."""
+    from the client's side; seen once in a fresh-clone suite run (2 cores). A late answer to an
+    earlier send is as good, but only the last send's is waited for."""
     client = node.create_client(service_type, name)
     assert client.wait_for_service(timeout_sec=timeout), f"no {name}"
     executor = SingleThreadedExecutor(context=node.context)
