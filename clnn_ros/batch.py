@@ -2,7 +2,7 @@
 
 It runs the core's own code, compiled: the physics, the encoder and every part of the learning
 rule (inference, tagging, punishment, reward, counter decay, the success counter: the
-`register_jitable` functions of clnn_ros.core.rln). What is its own is only the episode loop
+`jitable` functions of clnn_ros.core.rln). What is its own is only the episode loop
 and one shortcut: the network's decision for each input pattern is cached, and made again only
 when the pattern comes back after a change of the weights (a punishment or a reward), except
 with `tie_break="random"`, which draws on every tie.
@@ -20,8 +20,9 @@ from pathlib import Path
 
 import numba
 import numpy as np
+from numba.extending import register_jitable
 
-from .core import encoder, params, physics, random_stream, rln
+from .core import encoder, jitable, params, physics, random_stream, rln
 from .core.encoder import Encoder, encode_active
 from .core.episode import angle_grid, seed_setup
 from .core.params import Params
@@ -29,6 +30,12 @@ from .core.physics import CONTINUE, cartpole_step, physics_constants, trial_star
 from .core.rln import (NEVER, NONE, TIE_RANDOM, Rule, explore, infer, outcome, response_space,
                        restart_counters, tag_action_path, trial_start_count, update)
 
+# The core's functions, compiled where the engine calls them (the core itself imports no numba).
+for _function, _options in jitable.MARKED:
+    if _options:
+        register_jitable(**_options)(_function)
+    else:
+        register_jitable(_function)
 
 STALE = -1  # a cached decision made before the weights last changed
 
@@ -115,7 +122,8 @@ def _drop_stale_cache() -> None:
     cache drops it then (through the dispatchers' cache objects: numba has no public call)."""
     # params: the option indices (TIE_BREAKS) are compiled in as constants
     core_sources = b"".join(Path(m.__file__).read_bytes() for m in (rln, physics, encoder,
-                                                                    random_stream, params))
+                                                                    random_stream, params,
+                                                                    jitable))
     digest = hashlib.sha256(core_sources).hexdigest()
     stamp = Path(_run_many._cache._cache_path) / "batch.core_sources.sha256"
     try:

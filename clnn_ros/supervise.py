@@ -27,7 +27,10 @@ from .rosenv import (own_fast_dds_files, remove_files_of_dead_process,
 
 TAIL_LINES = 5
 _STDERR = threading.Lock()
-TERMINATE_S = 2.0  # a node stops within this of SIGTERM while its Python code runs
+# A node whose Python code runs stops within this of SIGTERM: its spin loop's 0.1 s, the wait
+# for its last messages' acknowledgements (nodes.common.ACK_WAIT_S, 2 s: a killed subscriber
+# never acknowledges) and its participant's deletion.
+TERMINATE_S = 5.0
 SAMPLE_S = 0.5  # how often the children's shared-memory files are noted
 # "<prog>: error: <message>" (the project's one-line errors) or a ROS log line at ERROR.
 OWN_ERROR = re.compile(r"^(?:\S+: error: |\[ERROR\] \[[\d.]+\] \[[^\]]+\]: )(.*)$")

@@ -38,12 +38,14 @@ class NoisyCartPole(Node):
         # sim time stands still before the first tick: the readiness timer runs on steady time
         self.timer = self.create_timer(0.02, self.announce, clock=RosClock(
             clock_type=ClockType.STEADY_TIME))
-        self.create_subscription(Clock, "clock", self.on_clock, LOCKSTEP)
-        self.create_subscription(TrialEvent, "trial/event", self.on_event, LOCKSTEP)
-        self.create_subscription(Action, "rln/action", self.on_action, LOCKSTEP)
+        self.inputs = [self.create_subscription(Clock, "clock", self.on_clock, LOCKSTEP),
+                       self.create_subscription(TrialEvent, "trial/event", self.on_event, LOCKSTEP),
+                       self.create_subscription(Action, "rln/action", self.on_action, LOCKSTEP)]
 
-    def announce(self):  # encoder, reward and trial manager subscribe to the state
-        if self.pub.get_subscription_count() >= 3:
+    def announce(self):  # encoder, reward and trial manager subscribe to the state; each input
+        # must know its publisher too (discovery is one-sided: an unmatched reader drops data)
+        if self.pub.get_subscription_count() >= 3 and all(
+                s.get_publisher_count() for s in self.inputs):
             self.ready.publish(String(data="environment")), self.timer.cancel()
 
     def refuse(self, why):

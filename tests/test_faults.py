@@ -24,7 +24,7 @@ from clnn_ros.rosenv import fast_dds_shm_files, shm_files_in_use
 from test_graph import processes_with, wait_for_line
 from test_recording import assert_every_tick, child, raw_messages, start_run
 
-from conftest import HANG_S, free_domain_id, ros_environment
+from conftest import HANG_S, free_domain_id, problem_lines, ros_environment
 
 pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 DOMAIN_ID = free_domain_id()
@@ -35,11 +35,6 @@ BROKEN = Path(__file__).with_name("broken_env_node.py")
 @pytest.fixture(scope="module")
 def ros_env(tmp_path_factory):
     return ros_environment(DOMAIN_ID, tmp_path_factory)
-
-
-def error_lines(stderr: str) -> list[str]:
-    """run_all's own lines (the nodes' ROS log lines start with '[', stderr tails with '  ')."""
-    return [line for line in stderr.splitlines() if line.startswith("run_all:")]
 
 
 class ReadLines:
@@ -74,7 +69,7 @@ def test_killed_process_is_named_at_once_and_the_graph_comes_down(ros_env, tmp_p
     process.wait(timeout=120)
     text = stderr.text()
     assert process.returncode == 1, text[-3000:]
-    assert error_lines(text) == [f"run_all: error: node '{node}' died (SIGKILL)"], text[-3000:]
+    assert problem_lines(text) == [f"run_all: error: node '{node}' died (SIGKILL)"], text[-3000:]
     assert "Traceback" not in text
     if node != "recorder":  # a killed recorder leaves its complete chunks (test_recording)
         # Finalized (read without --salvage): every tick up to the fault, but for what the
@@ -101,7 +96,7 @@ def test_a_paused_process_is_waited_for(ros_env, tmp_path, node):
     os.kill(pid, signal.SIGCONT)
     _, stderr = process.communicate(timeout=120)
     assert process.returncode == 0, stderr[-3000:]
-    assert not error_lines(stderr) or all("error" not in line for line in error_lines(stderr))
+    assert not problem_lines(stderr) or all("error" not in line for line in problem_lines(stderr))
     with open(tmp_path / "trials.csv") as f:
         steps = [int(row["steps"]) for row in csv.DictReader(f)]
     assert steps == run_episode(seed, Params(trials=trials, max_steps=max_steps)).steps.tolist()
@@ -114,7 +109,7 @@ def test_silent_node_is_named_after_the_stall_timeout(ros_env, tmp_path):
                         "--env-node", f"python {BROKEN} mute")
     _, stderr = process.communicate(timeout=HANG_S)
     assert process.returncode == 1
-    assert error_lines(stderr) == ["run_all: error: stall: node 'environment' went silent at "
+    assert problem_lines(stderr) == ["run_all: error: stall: node 'environment' went silent at "
                                    "tick 50 (no progress for 1 s)"]
     assert assert_every_tick(raw_messages(tmp_path / "bag")) == 49
     assert not processes_with(str(tmp_path))
@@ -127,7 +122,7 @@ def test_a_wrong_tick_is_blamed_on_its_sender(ros_env, tmp_path):
                         "--env-node", f"python {BROKEN} wrong_tick")
     _, stderr = process.communicate(timeout=HANG_S)
     assert process.returncode == 1
-    assert error_lines(stderr) == [
+    assert problem_lines(stderr) == [
         "run_all: error: stall: node 'environment' went silent at tick 2 (no progress for 1 s; "
         "last refused cartpole/state: tick 3: expected tick 2)"], stderr[-3000:]
 
@@ -142,7 +137,7 @@ def test_a_node_that_fails_at_start_ends_the_run_at_once(ros_env, tmp_path, comm
          command], env={**ros_env, "CLNN_TEST_RUN": str(tmp_path)}, capture_output=True,
         text=True, timeout=HANG_S)
     assert run.returncode == 1
-    lines = error_lines(run.stderr)
+    lines = problem_lines(run.stderr)
     assert len(lines) == 1 and lines[0].startswith("run_all: error: ") and \
         "node 'environment' exited with status" in lines[0], run.stderr[-2000:]
     assert not (tmp_path / "bag").exists()  # nothing was recorded: no bag
@@ -189,7 +184,7 @@ def test_a_second_graph_on_the_same_domain_and_namespace_is_refused(ros_env, tmp
             env={**ros_env, "CLNN_TEST_RUN": str(tmp_path / "second")}, capture_output=True,
             text=True, timeout=HANG_S)
         assert second.returncode == 1
-        lines = error_lines(second.stderr)
+        lines = problem_lines(second.stderr)
         assert len(lines) == 1 and lines[0].startswith(
             "run_all: error: another graph runs in namespace / on ROS domain"), second.stderr
         assert not (tmp_path / "second" / "bag").exists()  # it held the other's messages

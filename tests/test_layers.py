@@ -1,5 +1,6 @@
 """The layers hold: the core imports nothing else of the project, the offline tools load neither
-rclpy nor numba, and every console script names a main() that exists."""
+rclpy nor numba, the graph's processes no numba, and every console script names a main() that
+exists."""
 
 from __future__ import annotations
 
@@ -37,6 +38,18 @@ def test_offline_tools_load_neither_rclpy_nor_numba():
     subprocess.run([sys.executable, "-m", "clnn_ros.analyze", "--help"], capture_output=True,
                    check=True)
     assert cpu_seconds_of_children() - before < 1.0
+
+
+def test_the_graphs_processes_load_no_numba():
+    """Numba is the batch engine's alone: in each of a graph's processes it would be two thirds
+    of the start-up (core.jitable)."""
+    modules = ["clnn_ros.run_all", "clnn_ros.nodes.gymnasium_env", "clnn_ros.nodes.recorder",
+               *(f"clnn_ros.nodes.{name}" for name in ("environment", "encoder", "reward",
+                                                       "agent", "trial_manager"))]
+    check = f"import sys, {', '.join(modules)}; print('numba' in sys.modules)"
+    loaded = subprocess.run([sys.executable, "-c", check], capture_output=True, text=True,
+                            check=True).stdout.strip()
+    assert loaded == "False"
 
 
 def cpu_seconds_of_children() -> float:

@@ -20,9 +20,8 @@ from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
 
 from test_graph import processes_with, read_steps, wait_for_line
-from test_faults import error_lines
 
-from conftest import HANG_S, free_domain_id, ros_environment
+from conftest import HANG_S, free_domain_id, problem_lines, ros_environment
 
 pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 DOMAIN_ID = free_domain_id()
@@ -149,7 +148,7 @@ def test_a_full_disk_ends_the_run_with_one_line_and_keeps_the_finished_trials(ro
         pytest.skip("no mount namespace here")
     assert run.returncode == 1, run.stderr[-3000:]
     assert "Traceback" not in run.stderr
-    lines = error_lines(run.stderr)
+    lines = problem_lines(run.stderr)
     assert len(lines) == 1 and lines[0].startswith(f"run_all: error: disk full writing {full}/"), \
         run.stderr[-3000:]
     steps = read_steps(kept)

@@ -16,8 +16,8 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-from numba.extending import register_jitable
 
+from .jitable import jitable
 from .params import STATE_NAMES, Params
 
 STATE_UNITS = ("m", "m/s", "deg", "deg/s")
@@ -74,7 +74,7 @@ class Encoder:
         return vector
 
 
-@register_jitable
+@jitable
 def encode_active(state, components, edges, offsets, out):
     """Write into `out` the index of the spiking input of each encoded variable: the interval is
     the number of interior edges <= value (lower-inclusive intervals)."""

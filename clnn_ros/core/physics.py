@@ -27,7 +27,7 @@ Integrators: ``semi_implicit`` Euler, velocities first (x_dot += tau x_acc; x +=
 the paper's default, or explicit ``euler`` (positions from the old velocities, as Gymnasium's
 default). A trial fails when |theta| > angle limit or |x| > track limit after a step.
 
-The step function is written in the subset of Python that numba compiles (``register_jitable``),
+The step function is written in the subset of Python that numba compiles (``jitable``),
 so the batch engine runs this very code.
 """
 
@@ -35,8 +35,8 @@ from __future__ import annotations
 
 import math
 
-from numba.extending import register_jitable
 
+from .jitable import jitable
 from .params import Params
 
 DEG = math.pi / 180.0  # radians per degree
@@ -55,7 +55,7 @@ def physics_constants(p: Params) -> tuple:
             p.angle_limit_deg, p.track_limit_m)
 
 
-@register_jitable
+@jitable
 def cartpole_step(x, x_dot, theta_deg, theta_dot_deg, force, constants):
     """Advance one time step tau under `force` (N). Returns (x, x_dot, theta_deg, theta_dot_deg, status)
     with status CONTINUE, FAIL_ANGLE or FAIL_POSITION."""
@@ -90,7 +90,7 @@ def cartpole_step(x, x_dot, theta_deg, theta_dot_deg, force, constants):
     return x, x_dot, theta_deg, theta_dot_deg, status
 
 
-@register_jitable
+@jitable
 def trial_start_state(initial_angle_deg, released, constants):
     """A trial's first state: cart centred and at rest, pole at rest at the initial angle; with
     `released` (first_action="no_force") that state one step of F = 0 later (whether that step

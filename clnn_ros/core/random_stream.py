@@ -2,10 +2,11 @@
 from identically, so even the `tie_break="random"` option is reproducible across paths."""
 
 import numpy as np
-from numba.extending import register_jitable
+
+from .jitable import jitable
 
 
-@register_jitable
+@jitable
 def next_uniform(state):
     """Advance state[0] (a uint64 array of length 1) and return a float in [0, 1)."""
     state[0] = state[0] + np.uint64(0x9E3779B97F4A7C15)

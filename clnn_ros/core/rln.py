@@ -24,7 +24,7 @@ Update, after the environment step (section 2.3, Figure 6):
     then every counter decays by one; weights are clipped to [0, w_max]. A trial starts with
     every decay counter and e flag at 0 (decay_counters="carry": as the last trial left them).
 
-The rule is written once, as the functions below (`register_jitable`: plain Python when called
+The rule is written once, as the functions below (`jitable`: plain Python when called
 from Python, compiled into the numba batch engine, clnn_ros.batch, which calls the same
 functions). Every option of the rule (tie_break, inference, tagging, e_flag, punish_timing,
 decay_counters, success_counter) is decided here and nowhere else. The classes at the end hold the state and call them, tick by tick.
@@ -36,8 +36,8 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba.extending import register_jitable
 
+from .jitable import jitable
 from .params import TIE_BREAKS, Params
 from .random_stream import next_uniform
 
@@ -50,11 +50,11 @@ TIE_EXACT, TIE_RANDOM = TIE_BREAKS.index("exact"), TIE_BREAKS.index("random")
 # reference counting, which would cost more there than the rule's own work: the functions called
 # on every tick are inlined into it (tick_kernel), the others are compiled without reference
 # counting too (kernel; none of them makes an array).
-kernel = register_jitable(_nrt=False)
+kernel = jitable(_nrt=False)
 
 
 def tick_kernel(function):
-    return register_jitable(inline="always")(function)
+    return jitable(function, inline="always")
 
 
 class Rule(NamedTuple):
@@ -124,7 +124,7 @@ def wta(ceiled, exact, count, tie_break, random_state):
     return best
 
 
-@register_jitable  # it makes an array: with reference counting
+@jitable  # it makes an array: with reference counting
 def response_space(n_segments):
     """Scratch space for infer: the ceiled and the exact responses of the WTA's candidates."""
     return np.empty((2, max(n_segments, 2)))

@@ -102,8 +102,8 @@ def steady_clock() -> Clock:
 class GraphNode(Node):
     """A node of the graph. It reads the shared parameters into a validated core Params,
     announces on READY once each of its publishers has matched the subscribers the graph gives
-    it (again every READY_REPEAT_S until the graph runs), and stops when the trial manager
-    announces the end of the episode."""
+    it and each of its subscriptions has matched its publisher (again every READY_REPEAT_S until
+    the graph runs), and stops when the trial manager announces the end of the episode."""
 
     listens_to_trial_events = True  # every node but their publisher, the trial manager
     driven_by_clock = True  # its time is the graph's sim time (use_sim_time)
@@ -126,9 +126,10 @@ class GraphNode(Node):
         self._unlogged = {}  # topic: [refusals not logged yet, when the last line was logged]
         self.finished = Future()
         self._expected = []
+        self._inputs = []  # the subscriptions of subscribe(): each has a publisher in the graph
         for attribute, (msg_type, topic, subscribers) in publishers.items():
             self.add_publisher(attribute, msg_type, topic, subscribers)
-        self._ready = ReadyAnnouncer(self, self.get_name(), self.publishers_matched,
+        self._ready = ReadyAnnouncer(self, self.get_name(), self.matched,
                                      lambda: self.current_tick() > 0)
         self._ready_timer = self.create_timer(0.02, self._announce_when_matched,
                                               clock=steady_clock())
@@ -142,9 +143,15 @@ class GraphNode(Node):
         setattr(self, attribute, publisher)
         self._expected.append((publisher, subscribers + len(self.extra_nodes)))
 
-    def publishers_matched(self) -> bool:
-        """Has each publisher matched the subscribers the graph gives it?"""
-        return all(p.get_subscription_count() >= n for p, n in self._expected)
+    def matched(self) -> bool:
+        """Has each publisher matched the subscribers the graph gives it, and each input its
+        publisher? Discovery is one-sided: a writer can match a reader that does not know the
+        writer yet; that reader drops what it is sent until it matches the writer too, and only
+        then has it sent again (Fast DDS's reliable repair). A start before both sides matched
+        made the first tick wait on discovery, which the stall watchdog counted (a healthy
+        node named "silent at tick 0" on a loaded machine)."""
+        return (all(p.get_subscription_count() >= n for p, n in self._expected) and
+                all(s.get_publisher_count() >= 1 for s in self._inputs))
 
     def _announce_when_matched(self) -> None:
         """Ready once the publishers have matched, until the graph runs (ReadyAnnouncer)."""
@@ -163,7 +170,7 @@ class GraphNode(Node):
                 callback(msg)
             else:
                 self.refuse(topic, msg, reason, kind="content")
-        self.create_subscription(msg_type, topic, receive, LOCKSTEP_QOS)
+        self._inputs.append(self.create_subscription(msg_type, topic, receive, LOCKSTEP_QOS))
 
     def refuse(self, topic: str, msg, reason: str, kind: str = "tick") -> None:
         """Drop a bad message (the node's state is not touched), count it by kind ("content":

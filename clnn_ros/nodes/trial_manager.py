@@ -195,7 +195,7 @@ class TrialManagerNode(GraphNode):
 
     def check_start(self, now: float, running: float) -> None:
         missing = self.expected - self.ready
-        if not missing and self.publishers_matched():
+        if not missing and self.matched():
             self.started_at = now
             self.advance(0, starts_trial=True)
             return

@@ -1,0 +1,22 @@
+"""The core's functions that the numba batch engine compiles, marked without importing numba.
+
+A marked function is plain Python when called from Python (the nodes, the reference core). The
+batch engine (clnn_ros.batch) registers every marked function with numba's `register_jitable`
+before it compiles, so it runs this very code. Numba is not imported here: it is two thirds of
+a node's start-up (0.7 s of CPU in each of a graph's processes, measured with -X importtime).
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+# (function, register_jitable's options), in the order they were marked
+MARKED: list[tuple[Callable, dict]] = []
+
+
+def jitable(function: Callable | None = None, **options):
+    """@jitable or @jitable(**options): mark `function` for register_jitable(**options)."""
+    def mark(function: Callable) -> Callable:
+        MARKED.append((function, options))
+        return function
+    return mark if function is None else mark(function)
