@@ -313,26 +313,33 @@ rclpy.spin(node)
 
 
 def test_nodes_announce_again_while_the_graph_waits(ros_env, tmp_path):
-    """While the graph waits (here for an environment node nobody starts), a node that is ready
-    announces it again and again: a trial manager that missed the one announcement (seen once
-    beside CPU hogs) would otherwise wait for good. Ready here: the encoder and the reward node
-    (every subscriber of their outputs is up); the others wait for the environment."""
+    """While the graph waits (here for an environment node that is up but never announces
+    itself: tests/broken_env_node.py silent), every node that is ready announces it again and
+    again: a trial manager that missed the one announcement (seen once beside CPU hogs) would
+    otherwise wait for good. Ready here: every node but the environment, since each of their
+    endpoints has matched its peers (the environment's included)."""
     run = start_external_run(ros_env, ["--stall-timeout", "600", "--trials", "2",
                                        "--namespace", "waiting", "--out", str(tmp_path / "out")],
                              tmp_path / "run_all.err")
-    listener = None
+    listener = environment = None
     try:
         Lines(run.stdout).wait_for(WAITING, timeout=120)
+        environment = subprocess.Popen(
+            [PY, BROKEN, "silent", "--ros-args", "-p", "trials:=2", "-p", "extra_nodes:=recorder",
+             "--log-level", "warn", "-r", "__ns:=/waiting", "-r", "/clock:=/waiting/clock"],
+            cwd=ROOT, env=ros_env, stdin=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         listener = subprocess.Popen([PY, "-c", READY_LISTENER], cwd=ROOT, env=ros_env,
                                     stdout=subprocess.PIPE, text=True)
         heard, lines = Counter(), Lines(listener.stdout)
-        while heard["encoder"] < 3 or heard["reward"] < 3:
+        ready = ("agent", "encoder", "recorder", "reward", "trial_manager")
+        while min(heard[name] for name in ready) < 3:
             heard[lines.wait_for("", timeout=120)] += 1
-        assert not set(heard) - {"encoder", "reward"}, heard
+        assert not set(heard) - set(ready), heard
     finally:
-        if listener is not None:
-            listener.kill()
-            listener.wait(timeout=30)
+        for process in (listener, environment):
+            if process is not None:
+                process.kill()
+                process.wait(timeout=30)
         run.send_signal(signal.SIGINT)
         try:
             run.wait(timeout=60)
