@@ -389,7 +389,10 @@ class Checker:
                                 f"first tick{self.stderr_tail()}")
             raise Abort
         pubs = {CLOCK: node.clock_pub, TRIAL_EVENT: node.event_pub, ACTION: node.action_pub}
-        self.spin(5.0, lambda: all(p.get_subscription_count() for p in pubs.values())
+        # Discovery is one-sided: the node's readers knowing the checker's writers (its
+        # readiness) says nothing of the writers knowing the readers; a loaded machine takes
+        # seconds for that, so it gets the start-up bound.
+        self.spin(self.startup_s, lambda: all(p.get_subscription_count() for p in pubs.values())
                   and self.environment_present() and node.get_publishers_info_by_topic(STATE))
         if not ready:
             self.fail("readiness", f"no readiness announcement: no String '{NAME}' on "
@@ -447,13 +450,21 @@ class Checker:
         """use_sim_time, read through the node's parameter services."""
         self.checked.add("sim_time")
         client = AsyncParameterClient(self.node, f"{self.namespace.rstrip('/')}/{NAME}")
-        if not self.spin(5.0, client.services_are_ready):
+        if not self.spin(self.startup_s, client.services_are_ready):
             self.fail("sim_time", "cannot read use_sim_time: its parameter services do not "
-                                  "answer within 5 s")
+                                  f"answer within {self.startup_s:g} s")
             return
+        # A service drops its response if it has not yet matched the client's reader (rmw
+        # waits 100 ms for that), which services_are_ready cannot see: the request, which
+        # changes nothing, is sent again every REPLY_S until the start-up bound.
+        deadline = time.monotonic() + self.startup_s
         future = client.get_parameters(["use_sim_time"])
-        if not self.spin(5.0, future.done) or future.result() is None:
-            self.fail("sim_time", "cannot read use_sim_time: no answer within 5 s")
+        while not self.spin(min(REPLY_S, max(0.0, deadline - time.monotonic())), future.done) \
+                and time.monotonic() < deadline:
+            future = client.get_parameters(["use_sim_time"])
+        if not future.done() or future.result() is None:
+            self.fail("sim_time", f"cannot read use_sim_time: no answer within "
+                                  f"{self.startup_s:g} s")
             return
         values = future.result().values
         if not values or values[0].type != ParameterType.PARAMETER_BOOL or \
@@ -582,7 +593,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="the namespace the node is started in (default /check_env_node; "
                              "/ for none)")
     parser.add_argument("--startup-timeout", type=float, default=30.0,
-                        help="seconds the node gets to announce readiness")
+                        help="seconds the node gets to announce readiness, and discovery "
+                             "to match the checker's endpoints with the node's")
     parser.add_argument("command", nargs=argparse.REMAINDER, help="the node's command line")
     args = parser.parse_args(argv)
     if not args.command:
