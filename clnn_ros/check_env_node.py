@@ -70,8 +70,11 @@ ANGLE_LIMIT_DEG, TRACK_LIMIT_M, TAU = 12.0, 2.4, 0.02  # the defaults the node g
 TYPES = {topic: TOPIC_TYPES[topic] for topic in (STATE, CLOCK, TRIAL_EVENT, ACTION)}
 QUIET_S = 0.3  # how long "no state may come" is watched
 REPLY_S = 5.0  # how long a state may take
-EXIT_S = 5.0  # how long the node gets to exit (EPISODE_END, end of stdin)
-APPEAR_S = 20.0  # at least this long for the node to appear in the graph when started again
+# How long the node gets to exit (EPISODE_END, end of stdin): its own exit waits up to 2 s for
+# its last messages' acknowledgements, then deletes its participant; beside CPU hogs a good node
+# took more than 5 s.
+EXIT_S = 15.0
+APPEAR_S = 20.0  # at least this long for the node to appear in the graph (at start, again)
 NAME = "environment"
 
 
@@ -382,6 +385,10 @@ class Checker:
 
     def connect(self) -> None:
         node, ns = self.node, self.namespace
+        # The readiness bound counts from the node's arrival: a loaded machine may take seconds
+        # to start its process.
+        self.spin(max(self.startup_s, APPEAR_S),
+                  lambda: self.environment_present() or NAME in node.ready)
         ready = self.spin(self.startup_s, lambda: NAME in node.ready)
         self.checked.update(("starts", "readiness", "interface", "lockstep"))
         if self.process.poll() is not None:
@@ -593,8 +600,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="the namespace the node is started in (default /check_env_node; "
                              "/ for none)")
     parser.add_argument("--startup-timeout", type=float, default=30.0,
-                        help="seconds the node gets to announce readiness, and discovery "
-                             "to match the checker's endpoints with the node's")
+                        help="seconds the node gets to announce readiness once it is in the "
+                             "graph, and discovery to match the checker's endpoints with the "
+                             "node's")
     parser.add_argument("command", nargs=argparse.REMAINDER, help="the node's command line")
     args = parser.parse_args(argv)
     if not args.command:
