@@ -336,9 +336,9 @@ def test_nodes_announce_again_while_the_graph_waits(ros_env, tmp_path):
             heard[lines.wait_for("", timeout=120)] += 1
         assert not set(heard) - set(ready), heard
     finally:
-        for process in (listener, environment):
+        for process in (listener, environment):  # SIGINT: each removes its Fast DDS files
             if process is not None:
-                process.kill()
+                process.send_signal(signal.SIGINT)
                 process.wait(timeout=30)
         run.send_signal(signal.SIGINT)
         try:
