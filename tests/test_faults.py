@@ -96,7 +96,7 @@ def test_a_paused_process_is_waited_for(ros_env, tmp_path, node):
     os.kill(pid, signal.SIGCONT)
     _, stderr = process.communicate(timeout=120)
     assert process.returncode == 0, stderr[-3000:]
-    assert not problem_lines(stderr) or all("error" not in line for line in problem_lines(stderr))
+    assert all("error" not in line for line in problem_lines(stderr)), stderr[-3000:]
     with open(tmp_path / "trials.csv") as f:
         steps = [int(row["steps"]) for row in csv.DictReader(f)]
     assert steps == run_episode(seed, Params(trials=trials, max_steps=max_steps)).steps.tolist()

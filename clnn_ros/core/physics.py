@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import math
 
-
 from .jitable import jitable
 from .params import Params
 

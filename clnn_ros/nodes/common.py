@@ -154,7 +154,7 @@ class GraphNode(Node):
                 all(s.get_publisher_count() >= 1 for s in self._inputs))
 
     def _announce_when_matched(self) -> None:
-        """Ready once the publishers have matched, until the graph runs (ReadyAnnouncer)."""
+        """Ready once every endpoint has matched, until the graph runs (ReadyAnnouncer)."""
         self._ready.poll()
         if self._ready.done:
             self._ready_timer.cancel()
