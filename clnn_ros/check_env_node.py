@@ -42,7 +42,7 @@ from clnn_ros_msgs.msg import Action, CartPoleState, TrialEvent
 
 from .cli import OneLineArgumentParser
 from .names import ACTION, CLOCK, READY, STATE, TOPIC_TYPES, TRIAL_EVENT, absolute
-from .nodes.common import EXIT_WITH_STDIN, LOCKSTEP_QOS, READY_QOS
+from .nodes.common import EXIT_WITH_STDIN, LOCKSTEP_QOS, READY_QOS, resend_until_answered
 
 RULES = {
     "starts": "the command starts a node that keeps running",
@@ -461,14 +461,9 @@ class Checker:
             self.fail("sim_time", "cannot read use_sim_time: its parameter services do not "
                                   f"answer within {self.startup_s:g} s")
             return
-        # A service drops its response if it has not yet matched the client's reader (rmw
-        # waits 100 ms for that), which services_are_ready cannot see: the request, which
-        # changes nothing, is sent again every REPLY_S until the start-up bound.
-        deadline = time.monotonic() + self.startup_s
-        future = client.get_parameters(["use_sim_time"])
-        while not self.spin(min(REPLY_S, max(0.0, deadline - time.monotonic())), future.done) \
-                and time.monotonic() < deadline:
-            future = client.get_parameters(["use_sim_time"])
+        future = resend_until_answered(lambda: client.get_parameters(["use_sim_time"]),
+                                       lambda future, s: self.spin(s, future.done),
+                                       self.startup_s, REPLY_S)
         if not future.done() or future.result() is None:
             self.fail("sim_time", f"cannot read use_sim_time: no answer within "
                                   f"{self.startup_s:g} s")

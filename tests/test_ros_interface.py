@@ -18,6 +18,7 @@ from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters
 
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
+from clnn_ros.nodes.common import resend_until_answered
 
 from test_graph import processes_with, read_steps, wait_for_line
 
@@ -33,21 +34,16 @@ def ros_env(tmp_path_factory):
 
 
 def call(node, service_type, name: str, request, timeout: float = 20.0, resend_s: float = 4.0):
-    """One answer to an idempotent request. Sent again every `resend_s`: rmw_fastrtps drops a
-    response (rclpy's "failed to send response (timeout)") when the server's response writer has
-    not yet matched the new client's reader within 100 ms, which wait_for_service cannot see
-    from the client's side; seen once in a fresh-clone suite run (2 cores). A late answer to an
-    earlier send is as good, but only the last send's is waited for."""
+    """One answer to an idempotent request, sent again every `resend_s` (a dropped response was
+    seen once in a fresh-clone suite run: common.resend_until_answered)."""
     client = node.create_client(service_type, name)
     assert client.wait_for_service(timeout_sec=timeout), f"no {name}"
     executor = SingleThreadedExecutor(context=node.context)
     executor.add_node(node)
-    deadline = time.monotonic() + timeout
-    while True:
-        future = client.call_async(request)
-        executor.spin_until_future_complete(future, timeout_sec=resend_s)
-        if future.done() or time.monotonic() >= deadline:
-            break
+    future = resend_until_answered(
+        lambda: client.call_async(request),
+        lambda future, s: executor.spin_until_future_complete(future, timeout_sec=s),
+        timeout, resend_s)
     executor.remove_node(node)
     assert future.done(), f"{name} did not answer"
     return future.result()

@@ -99,6 +99,21 @@ def steady_clock() -> Clock:
     return Clock(clock_type=ClockType.STEADY_TIME)
 
 
+def resend_until_answered(send: Callable[[], Future], wait: Callable[[Future, float], object],
+                          timeout_s: float, resend_s: float) -> Future:
+    """The future of an idempotent service request, sent again every `resend_s` until one send
+    is answered or `timeout_s` has passed; `wait(future, seconds)` spins until it is done or the
+    seconds pass. Why again: a server drops its response when its response writer has not yet
+    matched the client's reader (rmw_fastrtps waits 100 ms for that: rclpy logs "failed to send
+    response"), which the client's service_is_ready cannot see."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        future = send()
+        wait(future, min(resend_s, max(0.0, deadline - time.monotonic())))
+        if future.done() or time.monotonic() >= deadline:
+            return future
+
+
 class GraphNode(Node):
     """A node of the graph. It reads the shared parameters into a validated core Params,
     announces on READY once each of its publishers has matched the subscribers the graph gives
