@@ -49,7 +49,7 @@ def read_steps(out: Path) -> list[int]:
 @pytest.mark.parametrize("nsv, options", [(1, []), (2, ["--velocity-edge", "0.3"])],
                          ids=["1sv", "2sv"])
 def test_graph_equals_core(ros_env, tmp_path, composed, nsv, options):
-    trials, max_steps, seed = 10, 1500, 1
+    trials, max_steps, seed = 10, 800, 1  # 2 SV: 7 of the 10 trials reach the cap
     result = run_all(ros_env, "--seed", str(seed), "--nsv", str(nsv), "--trials", str(trials),
                      "--max-steps", str(max_steps), *options, "--out", str(tmp_path),
                      *(["--composed"] if composed else []))
