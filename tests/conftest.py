@@ -12,6 +12,19 @@ import time
 import pytest
 
 
+# The longest test files, longest first (seconds per file in a suite run, scripts/test.sh
+# --durations=0): scripts/test.sh gives whole files to two workers as they become free, so the
+# long ones go first and the short ones even out the end. The other files follow in their order.
+LONGEST_FIRST = ("test_faults", "test_recording", "test_graph", "test_isolation", "test_load",
+                 "test_batch", "test_env_contract", "test_fuzz", "test_leaks", "test_checkpoint",
+                 "test_ros_interface", "test_echo")
+
+
+def pytest_collection_modifyitems(items):
+    rank = {name: k for k, name in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.stem, len(rank)))  # stable: files stay whole
+
+
 @pytest.fixture(scope="session")
 def in_private_shm() -> list[str]:
     """A command prefix that runs a command with a /dev/shm of its own (only its files are
