@@ -12,6 +12,7 @@ import os
 import re
 import subprocess
 import sys
+import time
 from collections import Counter
 from pathlib import Path
 
@@ -20,6 +21,9 @@ import pytest
 
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
+from clnn_ros.rosenv import own_fast_dds_files, remove_unused_fast_dds_files
+
+from test_graph import EPISODE_HANG_S
 
 from conftest import free_domain_id, problem_lines
 
@@ -66,16 +70,27 @@ def test_every_fuzz_message_is_refused_and_the_episode_equals_the_core(tmp_path,
         [sys.executable, str(FUZZER), "--seed", "7", "--per-topic", str(per_topic),
          "--per-tick", "10", "--max-steps", str(max_steps), "--report", str(report_path)],
         env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    fuzzers_files = set()  # its segment and ports, noted while it runs (as run_all does)
+    with open(graph_log, "w") as stderr:  # throttled refusal lines and the summaries
+        graph = subprocess.Popen(
+            [sys.executable, "-m", "clnn_ros.run_all", "--quiet", "--no-record", "--seed",
+             str(seed), "--trials", str(trials), "--max-steps", str(max_steps), "--out",
+             str(tmp_path), *(["--composed"] if composed else [])], env=env,
+            stdout=subprocess.DEVNULL, stderr=stderr)
     try:
-        with open(graph_log, "w") as stderr:  # throttled refusal lines and the summaries
-            graph = subprocess.run(
-                [sys.executable, "-m", "clnn_ros.run_all", "--quiet", "--no-record", "--seed",
-                 str(seed), "--trials", str(trials), "--max-steps", str(max_steps), "--out",
-                 str(tmp_path), *(["--composed"] if composed else [])], env=env,
-                stdout=subprocess.PIPE, stderr=stderr, text=True, timeout=240)
+        deadline = time.monotonic() + EPISODE_HANG_S
+        while graph.poll() is None and time.monotonic() < deadline:
+            fuzzers_files |= own_fast_dds_files(fuzzer.pid)
+            time.sleep(0.5)
+        assert graph.poll() is not None, f"run_all still runs after {EPISODE_HANG_S} s"
         _, fuzz_errors = fuzzer.communicate(timeout=60)
     finally:
+        graph.kill()
         fuzzer.kill()
+    # The fuzzer leaves mid-episode: a graph node sending it a clock may re-create its port
+    # file as it removes it (Fast DDS 2.14, docs/ROS_GRAPH.md "Leftover files"), which nobody
+    # would remove; seen once in three runs of this file.
+    assert not remove_unused_fast_dds_files(fuzzers_files)
     assert fuzzer.returncode == 0, fuzz_errors
     logged = graph_log.read_text()
     assert graph.returncode == 0, logged[-2000:]
