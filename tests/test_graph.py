@@ -74,10 +74,10 @@ def test_graph_equals_core_for_other_encodings_and_choices(ros_env, tmp_path, op
     given = [arg for name, value in options.items() if name != "state_vars"
              for arg in ("--option", f"{name}={value}")]
     result = run_all(ros_env, "--seed", str(seed), "--state-vars", options["state_vars"],
-                     "--trials", str(trials), "--max-steps", "1500", *given,
+                     "--trials", str(trials), "--max-steps", "800", *given,
                      "--out", str(tmp_path))
     assert result.returncode == 0, result.stderr
-    core = run_episode(seed, Params(trials=trials, max_steps=1500, **options))
+    core = run_episode(seed, Params(trials=trials, max_steps=800, **options))
     assert read_steps(tmp_path) == core.steps.tolist()
     np.testing.assert_array_equal(np.load(tmp_path / "final_weights.npy"), core.final_weights)
     assert f"state {options['state_vars']}" in result.stdout
