@@ -53,8 +53,30 @@ def own_fast_dds_files(pid: int | str) -> set[str]:
                  if "fastrtps_" in name and name.endswith(("_el", "_sl"))}
     except OSError:
         return set()
-    return {f"{base}{suffix}" for base in (name[:-3] for name in locks)
-            for suffix in ("", "_el", "_sl")} | {f"sem.{name[:-3]}_mutex" for name in locks}
+    return _with_companions({name[:-3] for name in locks})
+
+
+def _with_companions(bases: set[str]) -> set[str]:
+    """Fast DDS segments or ports with their lock files and their mutex."""
+    return {f"{base}{suffix}" for base in bases for suffix in ("", "_el", "_sl")} | \
+        {f"sem.{base}_mutex" for base in bases}
+
+
+def written_fast_dds_files(pid: int | str) -> set[str]:
+    """This user's Fast DDS segments and ports that process `pid` has mapped or open, with their
+    lock files and mutex: its own and its peers' (the ports it writes to). A peer's port can be
+    left behind by this process: one that a killed peer could not remove, or one that a peer
+    removed on its way out while this process was opening it to send, which re-creates it
+    (Fast DDS 2.14; docs/ROS_GRAPH.md)."""
+    bases = set()
+    for name in shm_files_of(pid):
+        if name.startswith("fastrtps_") and not name.endswith(("_el", "_sl")):
+            try:
+                if os.stat(os.path.join(SHM, name)).st_uid == os.getuid():
+                    bases.add(name)
+            except OSError:
+                pass  # removed meanwhile
+    return _with_companions(bases)
 
 
 def remove_files_of_dead_process(names: set[str]) -> list[str]:

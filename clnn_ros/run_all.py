@@ -322,7 +322,7 @@ def warn_forced(forced: list[tuple[str, str]]) -> None:
 
 
 def run_composed(values: dict, environment: str | None, namespace: str,
-                 interrupted: list[int]) -> tuple[int, str | None]:
+                 interrupted: list[int], supervisor: Supervisor) -> tuple[int, str | None]:
     """All nodes in this process on one executor. Returns the trial manager's exit status (or
     128 + signal) and its reason."""
     import importlib
@@ -352,6 +352,7 @@ def run_composed(values: dict, environment: str | None, namespace: str,
             return 128 + interrupted[0], None
         return nodes[-1].finished.result(), nodes[-1].exit_reason
     finally:
+        supervisor.note_files()  # the ports these nodes write to, which their end unmaps
         for node in nodes:
             node.destroy_node()
         rclpy.try_shutdown()
@@ -450,7 +451,8 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
                   f"rest is ready)", flush=True)
         failed = recorder_forced = False
         if args.composed:
-            status, reason = run_composed(values, environment, namespace, interrupted)
+            status, reason = run_composed(values, environment, namespace, interrupted,
+                                          supervisor)
         else:
             status, failed = run_separate(supervisor, values, Path(tmp), env_command,
                                           namespace, interrupted, began)

@@ -23,7 +23,7 @@ from collections import deque
 from pathlib import Path
 
 from .rosenv import (own_fast_dds_files, remove_files_of_dead_process,
-                     remove_unused_fast_dds_files)
+                     remove_unused_fast_dds_files, written_fast_dds_files)
 
 TAIL_LINES = 5
 _STDERR = threading.Lock()
@@ -107,7 +107,7 @@ class Child:
 
 
 class Supervisor:
-    """The children of one run and their own Fast DDS files (and run_all's)."""
+    """The children of one run, the Fast DDS files they own or write to (and run_all's)."""
 
     def __init__(self):
         self.children: dict[str, Child] = {}
@@ -115,6 +115,7 @@ class Supervisor:
         self._janitor = subprocess.Popen([sys.executable, "-m", "clnn_ros.shm_janitor"],
                                          stdin=subprocess.PIPE, text=True, start_new_session=True)
         self._janitor_lock = threading.Lock()
+        self._noting = threading.Lock()
         self._stop_sampling = threading.Event()
         self._sampler = threading.Thread(target=self._sample, daemon=True, name="shm-sampler")
         self._sampler.start()
@@ -140,12 +141,19 @@ class Supervisor:
 
     def _sample(self) -> None:
         while not self._stop_sampling.wait(SAMPLE_S):
+            self.note_files()
+
+    def note_files(self) -> None:
+        """Note the Fast DDS files that run_all and its running children own or write to (every
+        SAMPLE_S, and by run_all before its own nodes end: a port written to for less than
+        SAMPLE_S could be missed)."""
+        with self._noting:  # the sampler thread and the main thread
             known = set(self.shm_files)
-            self.shm_files |= own_fast_dds_files(os.getpid())
+            self.shm_files |= own_fast_dds_files(os.getpid()) | written_fast_dds_files(os.getpid())
             for child in list(self.children.values()):
                 if child.process.poll() is None:
                     child.shm_files |= own_fast_dds_files(child.process.pid)
-                    self.shm_files |= child.shm_files
+                    self.shm_files |= child.shm_files | written_fast_dds_files(child.process.pid)
             self._tell_janitor(*(f"file {name}" for name in sorted(self.shm_files - known)))
 
     def first_failure(self, exclude: set[str]) -> Child | None:
@@ -188,7 +196,8 @@ class Supervisor:
         return forced
 
     def close(self) -> list[str]:
-        """After every child ended: remove the run's Fast DDS files that no process uses.
+        """After every child ended: remove the Fast DDS files of the run (its processes' own,
+        and the peers' ports they wrote to) that no process uses.
         Returns the problems (files that could not be removed), one line each."""
         self._stop_sampling.set()
         self._sampler.join(timeout=2.0)

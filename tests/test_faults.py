@@ -17,9 +17,12 @@ from pathlib import Path
 
 import pytest
 
+from clnn_ros import names
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
-from clnn_ros.rosenv import fast_dds_shm_files, shm_files_in_use
+from clnn_ros.names import STATE
+from clnn_ros.rosenv import (fast_dds_shm_files, own_fast_dds_files,
+                             remove_unused_fast_dds_files, shm_files_in_use)
 
 from test_graph import processes_with, wait_for_line
 from test_recording import assert_every_tick, child, raw_messages, start_run
@@ -143,6 +146,36 @@ def test_a_node_that_fails_at_start_ends_the_run_at_once(ros_env, tmp_path, comm
     assert not (tmp_path / "bag").exists()  # nothing was recorded: no bag
     assert "run_all: nothing recorded, no bag" in run.stdout
     assert not processes_with(str(tmp_path))
+
+
+@pytest.mark.parametrize("composed", [False, True], ids=["processes", "composed"])
+def test_the_port_of_a_killed_listener_is_removed_with_the_run(ros_env, tmp_path, composed):
+    """A participant of no run (here clnn_ros.echo on the state) killed while the environment
+    writes to it leaves its Fast DDS ports; the run's processes wrote to them, so the run
+    removes them once it ended and no process uses them. (So also a port that a peer leaving
+    the graph removed while a node opened it to send, which the node re-creates:
+    docs/ROS_GRAPH.md.)"""
+    process = start_run(ros_env, tmp_path, "--no-record", *(["--composed"] if composed else []))
+    try:
+        wait_for_line(process.stdout, "trial    2/")
+        echo = subprocess.Popen([sys.executable, "-m", "clnn_ros.echo", names.absolute(STATE)],
+                                env={**ros_env, "CLNN_TEST_RUN": str(tmp_path)},
+                                stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        wait_for_line(echo.stdout, "---")  # it receives: the environment writes to its port
+        echos = own_fast_dds_files(echo.pid) & fast_dds_shm_files()
+        ports = {name for name in echos if "fastrtps_port" in name}
+        echo.kill()
+        echo.wait(timeout=30)
+        assert ports and ports <= fast_dds_shm_files()  # a killed process removes nothing
+        wait_for_line(process.stdout, "trial    4/")
+    finally:
+        os.killpg(process.pid, signal.SIGINT)
+        _, stderr = process.communicate(timeout=HANG_S)
+    assert process.returncode == 130, stderr[-3000:]
+    # (a port number freed by a participant's end can be taken by a new one elsewhere: in use)
+    left = ports & fast_dds_shm_files() - shm_files_in_use()
+    assert not left, sorted(left)
+    assert not remove_unused_fast_dds_files(echos)  # its segments: the run never mapped them
 
 
 def test_killing_run_all_ends_its_children(ros_env, tmp_path, in_private_shm):

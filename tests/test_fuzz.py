@@ -21,7 +21,7 @@ import pytest
 
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
-from clnn_ros.rosenv import own_fast_dds_files, remove_unused_fast_dds_files
+from clnn_ros.rosenv import fast_dds_shm_files, own_fast_dds_files, shm_files_in_use
 
 from test_graph import EPISODE_HANG_S
 
@@ -70,7 +70,7 @@ def test_every_fuzz_message_is_refused_and_the_episode_equals_the_core(tmp_path,
         [sys.executable, str(FUZZER), "--seed", "7", "--per-topic", str(per_topic),
          "--per-tick", "10", "--max-steps", str(max_steps), "--report", str(report_path)],
         env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    fuzzers_files = set()  # its segment and ports, noted while it runs (as run_all does)
+    fuzzers_files = set()  # its segments and ports, noted while it runs
     with open(graph_log, "w") as stderr:  # throttled refusal lines and the summaries
         graph = subprocess.Popen(
             [sys.executable, "-m", "clnn_ros.run_all", "--quiet", "--no-record", "--seed",
@@ -88,9 +88,11 @@ def test_every_fuzz_message_is_refused_and_the_episode_equals_the_core(tmp_path,
         graph.kill()
         fuzzer.kill()
     # The fuzzer leaves mid-episode: a graph node sending it a clock may re-create its port
-    # file as it removes it (Fast DDS 2.14, docs/ROS_GRAPH.md "Leftover files"), which nobody
-    # would remove; seen once in three runs of this file.
-    assert not remove_unused_fast_dds_files(fuzzers_files)
+    # file as it removes it (Fast DDS 2.14, docs/ROS_GRAPH.md "Leftover files"; seen once in
+    # three runs of this file); the run removes the ports its nodes wrote to. (A port number
+    # freed by the fuzzer's end can be taken by a new participant elsewhere: in use.)
+    left = fuzzers_files & fast_dds_shm_files() - shm_files_in_use()
+    assert not left, sorted(left)
     assert fuzzer.returncode == 0, fuzz_errors
     logged = graph_log.read_text()
     assert graph.returncode == 0, logged[-2000:]
