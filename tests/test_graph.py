@@ -70,14 +70,14 @@ def test_graph_equals_core(ros_env, tmp_path, composed, nsv, options):
     ids=["angle and position", "3 SV, every new open choice"])
 def test_graph_equals_core_for_other_encodings_and_choices(ros_env, tmp_path, options):
     # the encoder node encodes, the environment releases the pole, the agent learns as the core
-    trials, seed = 8, 2
+    trials, max_steps, seed = 8, 800, 2
     given = [arg for name, value in options.items() if name != "state_vars"
              for arg in ("--option", f"{name}={value}")]
     result = run_all(ros_env, "--seed", str(seed), "--state-vars", options["state_vars"],
-                     "--trials", str(trials), "--max-steps", "800", *given,
+                     "--trials", str(trials), "--max-steps", str(max_steps), *given,
                      "--out", str(tmp_path))
     assert result.returncode == 0, result.stderr
-    core = run_episode(seed, Params(trials=trials, max_steps=800, **options))
+    core = run_episode(seed, Params(trials=trials, max_steps=max_steps, **options))
     assert read_steps(tmp_path) == core.steps.tolist()
     np.testing.assert_array_equal(np.load(tmp_path / "final_weights.npy"), core.final_weights)
     assert f"state {options['state_vars']}" in result.stdout
