@@ -25,7 +25,7 @@ from clnn_ros.rosenv import fast_dds_shm_files, own_fast_dds_files, shm_files_in
 
 from test_graph import EPISODE_HANG_S
 
-from conftest import free_domain_id, problem_lines
+from conftest import files_no_other_test_makes, free_domain_id, problem_lines
 
 pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 DOMAIN_ID = free_domain_id()
@@ -89,9 +89,8 @@ def test_every_fuzz_message_is_refused_and_the_episode_equals_the_core(tmp_path,
         fuzzer.kill()
     # The fuzzer leaves mid-episode: a graph node sending it a clock may re-create its port
     # file as it removes it (Fast DDS 2.14, docs/ROS_GRAPH.md "Leftover files"; seen once in
-    # three runs of this file); the run removes the ports its nodes wrote to. (A port number
-    # freed by the fuzzer's end can be taken by a new participant elsewhere: in use.)
-    left = fuzzers_files & fast_dds_shm_files() - shm_files_in_use()
+    # three runs of this file); the run removes the ports its nodes wrote to.
+    left = files_no_other_test_makes(fuzzers_files) & fast_dds_shm_files() - shm_files_in_use()
     assert not left, sorted(left)
     assert fuzzer.returncode == 0, fuzz_errors
     logged = graph_log.read_text()
