@@ -95,12 +95,17 @@ def shm_files_in_use() -> set[str]:
     return used
 
 
+def unused_fast_dds_files(names: set[str] | None = None) -> set[str]:
+    """The Fast DDS files (all, or those of `names` that exist) that no process uses: what
+    killed processes left behind."""
+    candidates = fast_dds_shm_files() if names is None else names & fast_dds_shm_files()
+    return candidates - shm_files_in_use()
+
+
 def remove_unused_fast_dds_files(names: set[str] | None = None) -> list[str]:
     """Remove the Fast DDS files (all, or `names`) that no process uses, as `fastdds shm clean`
-    does: what killed processes left behind. Returns a line for each file that could not be
-    removed (another user's, say)."""
-    candidates = fast_dds_shm_files() if names is None else names & fast_dds_shm_files()
-    return _remove(candidates - shm_files_in_use())
+    does. Returns a line for each file that could not be removed (another user's, say)."""
+    return _remove(unused_fast_dds_files(names))
 
 
 def _remove(names: set[str]) -> list[str]:

@@ -25,7 +25,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from clnn_ros.rosenv import fast_dds_shm_files, processes_with_env, shm_files_in_use
+from clnn_ros.rosenv import fast_dds_shm_files, processes_with_env, unused_fast_dds_files
 
 RSS_BOUND_MB = 20.0  # allowed resident-memory growth over the in-process runs (allocator noise)
 
@@ -51,7 +51,7 @@ def separate_runs(runs: int, episode: list[str], workdir: Path) -> list[str]:
                                  str(out)], env={**os.environ, "CLNN_LEAK_RUN": str(out)},
                                 capture_output=True, text=True, timeout=120)
         left = processes_with_env("CLNN_LEAK_RUN", str(out))
-        new_shm = fast_dds_shm_files() - shm_before - shm_files_in_use()  # in use: not ours
+        new_shm = unused_fast_dds_files() - shm_before  # new, and used by no process
         print(f"process run {run + 1:2d}: exit {result.returncode}, "
               f"{time.monotonic() - started:5.1f} s, processes left {len(left)}, "
               f"new /dev/shm files {len(new_shm)}", flush=True)

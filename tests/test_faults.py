@@ -22,7 +22,7 @@ from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
 from clnn_ros.names import STATE
 from clnn_ros.rosenv import (fast_dds_shm_files, own_fast_dds_files,
-                             remove_unused_fast_dds_files, shm_files_in_use)
+                             remove_unused_fast_dds_files, unused_fast_dds_files)
 
 from test_graph import processes_with, wait_for_line
 from test_recording import assert_every_tick, child, raw_messages, start_run
@@ -173,7 +173,7 @@ def test_the_port_of_a_killed_listener_is_removed_with_the_run(ros_env, tmp_path
         os.killpg(process.pid, signal.SIGINT)
         _, stderr = process.communicate(timeout=HANG_S)
     assert process.returncode == 130, stderr[-3000:]
-    left = ports & fast_dds_shm_files() - shm_files_in_use()
+    left = unused_fast_dds_files(ports)
     assert not left, sorted(left)
     assert not remove_unused_fast_dds_files(echos)  # its segments: the run never mapped them
 
@@ -202,7 +202,7 @@ def test_killing_run_all_ends_its_children(ros_env, tmp_path, in_private_shm):
     if in_private_shm:
         left = {name for name in (tmp_path / "shm.txt").read_text().split() if "fastrtps" in name}
     else:  # a file of this run left over is new and used by no process
-        left = (fast_dds_shm_files() - shm_before) - shm_files_in_use()
+        left = unused_fast_dds_files() - shm_before
     assert not left, sorted(left)
     assert not list(temp.iterdir())
     assert "Traceback" not in stderr, stderr

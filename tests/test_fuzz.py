@@ -21,7 +21,7 @@ import pytest
 
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
-from clnn_ros.rosenv import fast_dds_shm_files, own_fast_dds_files, shm_files_in_use
+from clnn_ros.rosenv import own_fast_dds_files, unused_fast_dds_files
 
 from test_graph import EPISODE_HANG_S
 
@@ -90,7 +90,7 @@ def test_every_fuzz_message_is_refused_and_the_episode_equals_the_core(tmp_path,
     # The fuzzer leaves mid-episode: a graph node sending it a clock may re-create its port
     # file as it removes it (Fast DDS 2.14, docs/ROS_GRAPH.md "Leftover files"; seen once in
     # three runs of this file); the run removes the ports its nodes wrote to.
-    left = files_no_other_test_makes(fuzzers_files) & fast_dds_shm_files() - shm_files_in_use()
+    left = unused_fast_dds_files(files_no_other_test_makes(fuzzers_files))
     assert not left, sorted(left)
     assert fuzzer.returncode == 0, fuzz_errors
     logged = graph_log.read_text()

@@ -17,7 +17,7 @@ import pytest
 
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
-from clnn_ros.rosenv import fast_dds_shm_files, processes_with_env, shm_files_in_use
+from clnn_ros.rosenv import fast_dds_shm_files, processes_with_env, unused_fast_dds_files
 
 from conftest import free_domain_id, ros_environment
 
@@ -104,7 +104,7 @@ def test_ctrl_c_stops_everything(ros_env, tmp_path, in_private_shm):
     if in_private_shm:
         left = {name for name in (tmp_path / "shm.txt").read_text().split() if "fastrtps" in name}
     else:  # a file of this run left over is new and used by no process
-        left = (fast_dds_shm_files() - shm_before) - shm_files_in_use()
+        left = unused_fast_dds_files() - shm_before
     assert not left, sorted(left)
     assert not processes_with(marker["CLNN_TEST_RUN"])
 
