@@ -20,7 +20,6 @@ import pytest
 from clnn_ros import names
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
-from clnn_ros.names import STATE
 from clnn_ros.rosenv import (fast_dds_shm_files, own_fast_dds_files,
                              remove_unused_fast_dds_files, unused_fast_dds_files)
 
@@ -159,7 +158,8 @@ def test_the_port_of_a_killed_listener_is_removed_with_the_run(ros_env, tmp_path
     process = start_run(ros_env, tmp_path, "--no-record", *(["--composed"] if composed else []))
     try:
         wait_for_line(process.stdout, "trial    2/")
-        echo = subprocess.Popen([sys.executable, "-m", "clnn_ros.echo", names.absolute(STATE)],
+        echo = subprocess.Popen([sys.executable, "-m", "clnn_ros.echo",
+                                 names.absolute(names.STATE)],
                                 env={**ros_env, "CLNN_TEST_RUN": str(tmp_path)},
                                 stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
         wait_for_line(echo.stdout, "---")  # it receives: the environment writes to its port
