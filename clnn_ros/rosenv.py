@@ -38,7 +38,10 @@ def shm_files_of(pid: int | str) -> set[str]:
 def _open_shm_files(pid: int | str) -> set[str]:
     names = set()
     for fd in os.listdir(f"/proc/{pid}/fd"):
-        target = os.readlink(f"/proc/{pid}/fd/{fd}")
+        try:
+            target = os.readlink(f"/proc/{pid}/fd/{fd}")
+        except FileNotFoundError:
+            continue  # closed since the listing: the others are still read
         if target.startswith(SHM + "/"):
             names.add(target[len(SHM) + 1:])
     return names
