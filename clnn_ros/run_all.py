@@ -5,6 +5,7 @@ episode and print a summary.
     python -m clnn_ros.run_all --seed 1 --nsv 1 --trials 32 --out DIR
     python -m clnn_ros.run_all --composed            # all nodes in one process, one executor
     python -m clnn_ros.run_all --env gymnasium       # gymnasium's CartPole-v1 physics
+    python -m clnn_ros.run_all --preset gymnasium    # its physics in the project's cart-pole node
     python -m clnn_ros.run_all --env-node "python examples/noisy_cartpole.py"  # your own node
 
 Each node runs as its own process (`python -m clnn_ros.nodes.<name>`) with the same parameters
@@ -36,7 +37,9 @@ from . import bag
 from .cli import OneLineArgumentParser
 from .files import cannot_create
 from .core.checkpoint import Checkpoint, load_checkpoint
+from .core.gym_physics import GYM_PHYSICS
 from .core.params import STATE_NAMES, ParamError, Params, params_from_strings
+from .core.presets import PRESETS, overlay_values, preset_values
 from .init_weights import OPTIMAL, episode_start
 from .names import GRAPH_NODES, NOT_STARTED, RECORDER, RUN_SETTINGS, TRIAL_MANAGER
 from .nodes.common import EXIT_WITH_STDIN, catch_signals
@@ -51,7 +54,6 @@ DEMO = dict(seed=0, trials=20, nsv=1)
 ENVIRONMENTS = {"cartpole": ("clnn_ros.nodes.environment", "EnvironmentNode"),
                 "gymnasium": ("clnn_ros.nodes.gymnasium_env", "GymnasiumEnvironmentNode"),
                 "external": None}
-GYMNASIUM_TAU = 0.02  # s: the step of gymnasium's CartPole-v1, which --env gymnasium runs
 # Run settings that run_all sets itself: a value given would be overwritten (out_dir) or make
 # the graph wait for a participant that never comes (extra_nodes, the recorder's name).
 RUN_ALL_SETS = {"out_dir": "--out", "extra_nodes": "--bag / --no-record",
@@ -82,6 +84,10 @@ def parse_args(argv):
     parser.add_argument("--max-steps", type=int, help="successful steps that end a trial (10000)")
     parser.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                         help="any other model parameter, e.g. --option tie_break=index")
+    parser.add_argument("--preset", metavar="NAME",
+                        help="a named set of model parameters (" + ", ".join(PRESETS) + "; "
+                             "clnn-reproduce presets lists them); the params file, options and "
+                             "flags override it")
     parser.add_argument("--params-file", type=Path,
                         help="a ROS 2 parameters YAML (/**: ros__parameters: ...); options win")
     parser.add_argument("--composed", action="store_true",
@@ -172,26 +178,28 @@ def namespace_problem(name: str) -> str | None:
 
 def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
     """The parameter values every node gets, validated here before any node starts. Defaults:
-    the demonstration's, or a resumed checkpoint's seed and parameters."""
+    the demonstration's, or a resumed checkpoint's seed and parameters; then, each over the one
+    before, the preset, the params file, the options and the flags."""
     values = dict(DEMO) if checkpoint is None else checkpoint_values(checkpoint)
+    if args.preset is not None:
+        values = overlay_values(values, preset_values(args.preset))
     if args.params_file is not None:
-        values.update(read_params_file(args.params_file))
+        values = overlay_values(values, read_params_file(args.params_file))
+    options = {}
     for item in args.option:
         key, sep, value = item.partition("=")
         if not sep:
             raise ParamError(f"--option expects KEY=VALUE, got {item!r}")
         try:
-            values[key.strip()] = yaml.safe_load(value)
+            options[key.strip()] = yaml.safe_load(value)
         except yaml.YAMLError:
-            values[key.strip()] = value  # not YAML: the text, which the check below refuses
-    if args.state_vars is not None:  # they decide nsv
-        values.pop("nsv", None)
-    for key, value in (("seed", args.seed), ("trials", args.trials), ("nsv", args.nsv),
-                       ("state_vars", args.state_vars),
-                       ("physics", args.physics), ("velocity_edge", args.velocity_edge),
-                       ("max_steps", args.max_steps), ("stall_timeout_s", args.stall_timeout)):
-        if value is not None:
-            values[key] = value
+            options[key.strip()] = value  # not YAML: the text, which the check below refuses
+    values = overlay_values(values, options)
+    flags = (("seed", args.seed), ("trials", args.trials), ("nsv", args.nsv),
+             ("state_vars", args.state_vars),
+             ("physics", args.physics), ("velocity_edge", args.velocity_edge),
+             ("max_steps", args.max_steps), ("stall_timeout_s", args.stall_timeout))
+    values = overlay_values(values, {key: value for key, value in flags if value is not None})
     for name, option in RUN_ALL_SETS.items():
         if name in values:
             raise ParamError(f"{name} is set by run_all ({option}), not as a parameter")
@@ -202,8 +210,9 @@ def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
             str(Path(args.init_weights).resolve())
     model = {k: v for k, v in values.items() if k not in RUN_SETTINGS}
     params = params_from_strings(model)  # raises ParamError with one line
-    if args.env == "gymnasium" and args.env_node is None and params.tau != GYMNASIUM_TAU:
-        raise ParamError(f"--env gymnasium steps gymnasium's tau of {GYMNASIUM_TAU:g} s, got "
+    gym_tau = GYM_PHYSICS["tau"]
+    if args.env == "gymnasium" and args.env_node is None and params.tau != gym_tau:
+        raise ParamError(f"--env gymnasium steps gymnasium's tau of {gym_tau:g} s, got "
                          f"tau={params.tau:g}")
     if args.velocity_edge is not None and "cart_velocity" not in params.state_vars:
         raise ParamError(f"--velocity-edge needs cart_velocity among the state variables "
@@ -510,6 +519,7 @@ def announce(args, values: dict, checkpoint, namespace: str) -> None:
     print(f"run_all: seed {values['seed']}, {values['trials']} trials, {encoded}, "
           f"{mode}" + (f", environment: {args.env_node or args.env}"
                        if args.env_node or args.env != "cartpole" else "")
+          + (f", preset {args.preset}" if args.preset else "")
           + (f", namespace {namespace}" if namespace != "/" else ""), flush=True)
     if checkpoint is not None:
         print(f"run_all: resuming {args.init_weights} at trial {checkpoint.next_trial + 1} "

@@ -2,10 +2,9 @@
 step and state), so that the core, the batch-engine comparison and the gymnasium environment
 node (clnn_ros/nodes/gymnasium_env.py) all drive the very same simulator.
 
-Gymnasium's own constants apply (masscart 1.0 kg, masspole 0.1 kg, half-length 0.5 m, g 9.8,
-force 10 N, tau 0.02 s, explicit Euler, fails beyond 12 deg = 0.2095 rad or 2.4 m); the
-model's Params do not change them. Gymnasium keeps the state in radians (float64); the state
-seen by the encoder and published on /cartpole/state is in degrees: math.degrees(rad).
+Gymnasium's own constants apply (those of GYM_PHYSICS below); the model's Params do not
+change them. Gymnasium keeps the state in radians (float64); the state seen by the encoder and
+published on /cartpole/state is in degrees: math.degrees(rad).
 
     env = GymCartPole(); env.reset(0.5); status = env.step(1); x, x_dot, th_deg, thd_deg = env.state
 """
@@ -17,6 +16,12 @@ import math
 import numpy as np
 
 from .physics import CONTINUE, FAIL_ANGLE, FAIL_POSITION
+
+# Gymnasium's CartPole-v1 as Params values (gymnasium/envs/classic_control/cartpole.py: its
+# constants, true equations, explicit Euler, limits 12 deg and 2.4 m).
+GYM_PHYSICS = dict(cart_mass=1.0, pole_mass=0.1, pole_length=0.5, gravity=9.8, force=10.0,
+                   tau=0.02, physics="correct", integrator="euler", angle_limit_deg=12.0,
+                   track_limit_m=2.4)
 
 
 class GymCartPole:
@@ -55,8 +60,6 @@ class GymCartPole:
 
 
 def gym_matched_params(p):
-    """The Params that make the core's own physics the same model as gymnasium's CartPole-v1
-    (used to run the batch engine on gymnasium's physics)."""
-    return p.replace(cart_mass=1.0, pole_mass=0.1, pole_length=0.5, gravity=9.8, force=10.0,
-                     tau=0.02, physics="correct", integrator="euler", angle_limit_deg=12.0,
-                     track_limit_m=2.4)
+    """p with the core's own physics made the same model as gymnasium's CartPole-v1 (used to
+    run the batch engine on gymnasium's physics)."""
+    return p.replace(**GYM_PHYSICS)

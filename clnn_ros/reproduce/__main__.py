@@ -5,6 +5,9 @@ generated report docs/REPRODUCTION.md.
     python -m clnn_ros.reproduce learn --nsv 1 --seeds 0-31 --trials 512 --out DIR [--option key=value]
     python -m clnn_ros.reproduce learn --state-vars pole_angle,cart_position --seeds 0-3 --out DIR
     python -m clnn_ros.reproduce sweep --param sigma=128,256 [--param ...] --nsv 1 --seeds 0-3 --trials 64 --out DIR
+    python -m clnn_ros.reproduce presets            # the named parameter sets for --preset NAME
+    python -m clnn_ros.reproduce learn --preset gymnasium --seeds 0-31 --out DIR
+    python -m clnn_ros.reproduce gym-eval DIR [--episodes 100]  # DIR's weights in gymnasium itself
     python -m clnn_ros.reproduce figures [--out DIR] [--seeds 0-31]
     python -m clnn_ros.reproduce all [--out docs]
 
@@ -24,9 +27,11 @@ from pathlib import Path
 
 from ..cli import OneLineArgumentParser
 from ..core.params import STATE_NAMES, ParamError, Params, params_from_strings
+from ..core.presets import PRESETS, overlay_values, preset_values
 from .calibration import calibrate, print_calibration, write_calibration
 from .common import DEFAULT_SEEDS, LITERAL_EDGE, TRIALS, parse_seeds, stuck
 from .figures import figures_markdown, make_figures
+from .gym_eval import RESET_STRIDE, gym_eval, load_learn_output, print_gym_eval, write_gym_eval
 from .gymnasium_physics import SELECT_SEEDS, gymnasium_markdown, gymnasium_study, write_gymnasium
 from .learning import encodings, learn_run, paper_runs, print_seed_means, write_learn_outputs
 from .open_choices import OPTION_SEEDS, open_choices, open_choices_markdown, write_open_choices
@@ -40,21 +45,30 @@ from .sensitivity import (SENSITIVITY_SEEDS, check_sweep_names, parse_grid,
                           write_sensitivity, write_sweep, write_sweep_report)
 from .report import claims_markdown, data_files_markdown, header_markdown, write_report
 
+PRESET_HELP = ("a named set of parameter values (" + ", ".join(PRESETS) + "; the command "
+               "'presets' lists them) that the other flags and --options override")
 OWN_FLAGS = {"nsv": "--nsv", "state_vars": "--state-vars", "trials": "--trials",
              "velocity_edge": "--velocity-edge",
              "physics": "--physics"}  # Params fields `learn` sets with a flag, not --option
 
 
 def learn_params(args) -> Params:
-    values = {"trials": str(args.trials)}
+    """The preset's values (the command's default trials under them), then the command's own
+    flags and --options on top."""
+    values = {"trials": str(TRIALS)}
+    if args.preset is not None:
+        values = overlay_values(values, preset_values(args.preset))
+    given = {}
+    if args.trials is not None:
+        given["trials"] = str(args.trials)
     if args.nsv is not None:
-        values["nsv"] = str(args.nsv)
+        given["nsv"] = str(args.nsv)
     if args.state_vars is not None:
-        values["state_vars"] = args.state_vars
+        given["state_vars"] = args.state_vars
     if args.velocity_edge is not None:
-        values["velocity_edge"] = args.velocity_edge
+        given["velocity_edge"] = args.velocity_edge
     if args.physics is not None:
-        values["physics"] = args.physics
+        given["physics"] = args.physics
     for item in args.option:
         key, sep, value = item.partition("=")
         key = key.strip()
@@ -62,8 +76,8 @@ def learn_params(args) -> Params:
             raise ValueError(f"--option expects key=value, got {item!r}")
         if key in OWN_FLAGS:
             raise ValueError(f"set {key} with {OWN_FLAGS[key]}, not --option")
-        values[key] = value.strip()
-    return params_from_strings(values)
+        given[key] = value.strip()
+    return params_from_strings(overlay_values(values, given))
 
 
 def cmd_calibrate(args) -> None:
@@ -91,6 +105,21 @@ def cmd_sweep(args) -> None:
     figure, summary = write_sweep_report(runs, args.seeds, Path(args.out))
     print(sweep_summary_markdown(runs))
     print(f"wrote {len(files)} CSV files, {figure} and {summary}")
+
+
+def cmd_presets(args) -> None:
+    blocks = [f"{name}: {preset.description}\n"
+              + "".join(f"    {key}={value}\n" for key, value in preset.values.items())
+              for name, preset in PRESETS.items()]
+    print("\n".join(blocks), end="")
+
+
+def cmd_gym_eval(args) -> None:
+    learn = load_learn_output(Path(args.out), args.run)
+    returns = gym_eval(learn, args.episodes, args.seed_offset)
+    path = write_gym_eval(learn, returns, Path(args.out))
+    print_gym_eval(learn, returns)
+    print(f"wrote {path}")
 
 
 def cmd_figures(args) -> None:
@@ -165,7 +194,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="the encoded state variables instead, in input order, of: "
                          + ", ".join(STATE_NAMES))
     ln.add_argument("--seeds", default=DEFAULT_SEEDS, help="seeds, e.g. 0-31, 0,3,5 or 0-3,7")
-    ln.add_argument("--trials", type=int, default=TRIALS, help="trials per episode")
+    ln.add_argument("--preset", metavar="NAME", help=PRESET_HELP)
+    ln.add_argument("--trials", type=int, help=f"trials per episode (default {TRIALS})")
     ln.add_argument("--velocity-edge", type=str, default=None,
                     help=f"velocity edge in m/s (default: Table 1's {LITERAL_EDGE:g})")
     ln.add_argument("--physics", default=None, help="paper (default) or correct")
@@ -182,13 +212,27 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--nsv", type=int, choices=(1, 2, 3, 4), help="state variables (default 1)")
     sw.add_argument("--state-vars", metavar="NAMES", help="the encoded state variables instead")
     sw.add_argument("--seeds", default=DEFAULT_SEEDS, help="seeds, e.g. 0-31")
-    sw.add_argument("--trials", type=int, default=TRIALS, help="trials per episode")
+    sw.add_argument("--preset", metavar="NAME", help=PRESET_HELP)
+    sw.add_argument("--trials", type=int, help=f"trials per episode (default {TRIALS})")
     sw.add_argument("--velocity-edge", type=str, default=None, help="velocity edge in m/s")
     sw.add_argument("--physics", default=None, help="paper (default) or correct")
     sw.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                     help="any other Params field, fixed for the whole grid")
     sw.add_argument("--out", default="out/sweep", help="folder for the CSV files, figure, summary")
     sw.set_defaults(func=cmd_sweep)
+
+    ps = sub.add_parser("presets", help="the named parameter sets that --preset NAME takes")
+    ps.set_defaults(func=cmd_presets)
+
+    ge = sub.add_parser("gym-eval", help="a learn run's final weights, frozen, in gymnasium's "
+                                         "CartPole-v1 itself; writes OUT/gym_eval.csv")
+    ge.add_argument("out", metavar="OUT", help="the --out folder of clnn-reproduce learn")
+    ge.add_argument("--run", metavar="NAME", help="which final_weights_NAME.npz, when OUT holds "
+                                                  "several (e.g. 1sv)")
+    ge.add_argument("--episodes", type=int, default=100, help="episodes per seed")
+    ge.add_argument("--seed-offset", type=int, default=0,
+                    help=f"episode k of seed s resets with seed {RESET_STRIDE} * s + offset + k")
+    ge.set_defaults(func=cmd_gym_eval)
 
     fg = sub.add_parser("figures", help="Figures 7-15 as PNG (runs what they need)")
     fg.add_argument("--out", default="out/figures", help="folder for the PNG files")

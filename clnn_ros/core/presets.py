@@ -1,0 +1,50 @@
+"""Named sets of parameter values ("presets"): a starting point that a command's own flags and
+options override (`clnn-reproduce learn --preset NAME`, `sweep --preset`, `clnn-run --preset`;
+`clnn-reproduce presets` lists them).
+
+Each value is text, as params_from_strings takes it from the command line.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .gym_physics import GYM_PHYSICS
+from .params import ParamError
+
+
+@dataclass(frozen=True)
+class Preset:
+    description: str
+    values: dict[str, str]  # Params field -> text value
+
+
+PRESETS = {
+    "gymnasium": Preset(
+        "Gymnasium CartPole-v1's physics in the core's own simulator, pole angle and angular "
+        "velocity encoded",
+        {**{name: str(value) for name, value in GYM_PHYSICS.items()},
+         "state_vars": "pole_angle,pole_angular_velocity",
+         "angular_velocity_edges_deg_per_s": "-3,3"}),
+    "escape": Preset("the paper's physics with exploration, a way out of local optima "
+                     "(placeholder)", {"explore": "0.001"}),
+}
+
+
+def preset_values(name: str) -> dict[str, str]:
+    """A copy of the preset's values; ParamError with one line for an unknown name."""
+    if name not in PRESETS:
+        raise ParamError(f"unknown preset {name!r}; known: {', '.join(PRESETS)}")
+    return dict(PRESETS[name].values)
+
+
+def overlay_values(values: dict, changes: dict) -> dict:
+    """values with changes on top. nsv and state_vars say the same thing, so a change of one
+    alone drops the other (as Params.replace does): a preset's state_vars give way to a later
+    --nsv, and the other way round; both in one change must agree."""
+    kept = dict(values)
+    if "state_vars" in changes and "nsv" not in changes:
+        kept.pop("nsv", None)
+    if "nsv" in changes and "state_vars" not in changes:
+        kept.pop("state_vars", None)
+    return {**kept, **changes}
