@@ -27,8 +27,9 @@ from .core.encoder import Encoder, encode_active
 from .core.episode import angle_grid, seed_setup
 from .core.params import Params
 from .core.physics import CONTINUE, cartpole_step, physics_constants, trial_start_state
-from .core.rln import (NEVER, NONE, TIE_RANDOM, Rule, explore, infer, outcome, response_space,
-                       restart_counters, tag_action_path, trial_start_count, update)
+from .core.rln import (NEVER, NONE, TIE_RANDOM, Rule, explore, infer, outcome, rerandomize,
+                       response_space, restart_counters, tag_action_path, trial_start_count,
+                       update)
 
 # The core's functions, compiled where the engine calls them (the core itself imports no numba).
 for _function, _options in jitable.MARKED:
@@ -76,6 +77,8 @@ def _run_trials(weights, angles, constants, force, components, edges, offsets, m
     successes = 0
     for trial in range(angles.shape[0]):
         restart_counters(punish_tagged_at, reward_tagged_at, eligible, rule)
+        if learn and rerandomize(weights, trial, rule, rng):
+            decisions[:, 0] = STALE
         successes = trial_start_count(successes, rule)
         x, x_dot, theta, theta_dot = trial_start_state(angles[trial], released, constants)
         t = 0

@@ -45,6 +45,11 @@ CASES = {
     "exploring": (dict(nsv=1, explore=0.002), True),
     "exploring, random ties": (dict(nsv=2, velocity_edge=0.5, explore=0.01, tie_break="random"),
                                True),
+    "re-randomized": (dict(nsv=1, rerandomize_every=4, rerandomize_fraction=0.2,
+                           rerandomize_range=2.0), True),
+    "re-randomized, exploring, random ties": (dict(nsv=2, velocity_edge=0.5, explore=0.01,
+                                                   tie_break="random", rerandomize_every=3,
+                                                   rerandomize_fraction=0.5), True),
 }
 
 OPTIONS = {"tie_break": TIE_BREAKS, "tagging": TAGGING, "e_flag": E_FLAGS,

@@ -169,9 +169,24 @@ def test_counters_restart_each_trial():
     p = Params()
     agent = RLNAgent(p, np.full((2, 3, 6), 4.5))
     agent.act(np.eye(6, dtype=np.uint8)[0])
-    agent.begin_trial()
+    agent.begin_trial(0)
     agent.learn(PUNISH)
     assert np.all(agent.weights == 4.5)
+
+
+def test_rerandomization_redraws_weights_at_its_trials_only():
+    p = Params(rerandomize_every=3, rerandomize_fraction=0.5, rerandomize_range=2.0)
+    agent = RLNAgent(p, np.full((2, 3, 6), 1.0))
+    for trial in (0, 1, 2, 4):  # not due (and never at the episode's first trial)
+        agent.begin_trial(trial)
+    assert np.all(agent.weights == 1.0)
+    agent.begin_trial(3, learn=False)  # a frozen agent keeps its weights
+    assert np.all(agent.weights == 1.0)
+    agent.begin_trial(3)
+    redrawn = agent.weights != 1.0
+    assert 0 < redrawn.sum() < redrawn.size
+    assert np.all((agent.weights[redrawn] >= p.w_base)
+                  & (agent.weights[redrawn] < p.w_base + p.rerandomize_range))
 
 
 def test_calibration_b_constant_force_leaves_track_in_32_steps():

@@ -62,10 +62,11 @@ class EpisodeResult:
 
 def run_trial(agent: RLNAgent, counter: SuccessCounter, env: CartPole, encoder: Encoder,
               initial_angle_deg: float, p: Params, learn: bool = True,
-              trace: Callable[[tuple], None] | None = None) -> tuple[int, int]:
-    """Run one trial; returns (successful steps, end status). `trace` gets the state after each step."""
+              trace: Callable[[tuple], None] | None = None, trial: int = 0) -> tuple[int, int]:
+    """Run trial `trial` of an episode; returns (successful steps, end status). `trace` gets the
+    state after each step."""
     env.reset(initial_angle_deg)
-    agent.begin_trial()
+    agent.begin_trial(trial, learn)
     counter.begin_trial()
     steps = 0
     while steps < p.max_steps:
@@ -109,7 +110,8 @@ def run_episode(seed: int, p: Params, weights: np.ndarray | None = None, learn: 
     steps = np.zeros(len(angles), dtype=np.int64)
     status = np.zeros(len(angles), dtype=np.int64)
     for trial, angle in enumerate(angles):
-        steps[trial], status[trial] = run_trial(agent, counter, env, encoder, angle, p, learn)
+        steps[trial], status[trial] = run_trial(agent, counter, env, encoder, angle, p, learn,
+                                                trial=first_trial + trial)
     return EpisodeResult(seed, angles, steps, status, agent.weights.copy(),
                          capture(agent, counter, seed, first_trial + len(angles)))
 

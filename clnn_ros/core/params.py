@@ -94,6 +94,12 @@ class Params:
     # A way out of local optima (not in the paper): the network WTA's winner is overruled with
     # this probability and the other neuron acts (its winning segment is the path's).
     explore: float = 0.0
+    # The paper's section 5 proposal (not in its model): at the start of every
+    # rerandomize_every-th trial (0: never), each synapse is re-drawn with probability
+    # rerandomize_fraction, to w_base + uniform [0, rerandomize_range).
+    rerandomize_every: int = 0
+    rerandomize_fraction: float = 0.01
+    rerandomize_range: float = 1 / 128
 
     # Derived values; not set by users.
     n_inputs: int = field(init=False)
@@ -134,6 +140,10 @@ class Params:
                                      or not 1 <= segments <= MAX_SEGMENTS):
             raise ParamError(f"segments must be an integer from 1 to {MAX_SEGMENTS}, "
                              f"got {segments!r}")
+        if isinstance(self.rerandomize_every, bool) or not isinstance(self.rerandomize_every, int) \
+                or not 0 <= self.rerandomize_every < 2**31:
+            raise ParamError(f"rerandomize_every must be an integer from 0 (never) to 2**31 - 1, "
+                             f"got {self.rerandomize_every!r}")
         for name in ("sigma", "omega", "trials", "max_steps", "n_angles"):
             value = getattr(self, name)
             # Counts travel in the messages' uint32 fields (trial, successful_steps).
@@ -142,7 +152,7 @@ class Params:
         positive = ("w_max", "cart_mass", "pole_mass", "pole_length", "gravity", "tau",
                     "angle_limit_deg", "track_limit_m", "velocity_edge")
         non_negative = ("rho_plus", "rho_minus", "punish", "w_base", "w_range", "force",
-                        "angle_span_deg", "explore")
+                        "angle_span_deg", "explore", "rerandomize_fraction", "rerandomize_range")
         for name in positive + non_negative:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
@@ -153,9 +163,15 @@ class Params:
                 raise ParamError(f"{name} must be >= 0, got {value!r}")
         if not 0 <= self.explore <= 1:
             raise ParamError(f"explore must be a probability from 0 to 1, got {self.explore!r}")
+        if not 0 <= self.rerandomize_fraction <= 1:
+            raise ParamError(f"rerandomize_fraction must be a probability from 0 to 1, "
+                             f"got {self.rerandomize_fraction!r}")
         if self.w_base + self.w_range > self.w_max:
             raise ParamError(f"w_base + w_range ({self.w_base + self.w_range:g}) must not exceed "
                              f"w_max ({self.w_max:g})")
+        if self.w_base + self.rerandomize_range > self.w_max:
+            raise ParamError(f"w_base + rerandomize_range ({self.w_base + self.rerandomize_range:g})"
+                             f" must not exceed w_max ({self.w_max:g})")
         if self.angle_limit_deg > 12.0:
             raise ParamError(f"angle_limit_deg must be <= 12 (Table 1 encodes only [-12, 12)), "
                              f"got {self.angle_limit_deg!r}")

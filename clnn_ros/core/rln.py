@@ -27,7 +27,7 @@ Update, after the environment step (section 2.3, Figure 6):
 The rule is written once, as the functions below (`jitable`: plain Python when called
 from Python, compiled into the numba batch engine, clnn_ros.batch, which calls the same
 functions). Every option of the rule (tie_break, inference, tagging, e_flag, punish_timing,
-decay_counters, success_counter) is decided here and nowhere else. The classes at the end hold the state and call them, tick by tick.
+decay_counters, success_counter, rerandomize_*) is decided here and nowhere else. The classes at the end hold the state and call them, tick by tick.
 """
 
 from __future__ import annotations
@@ -74,6 +74,10 @@ class Rule(NamedTuple):
     punish_lag: int  # punish_timing: 0 "before_decay", 1 "after_decay" (ticks of decay first)
     decay_per_trial: bool  # decay_counters="per_trial"
     explore: float  # probability that the network WTA's winner is overruled
+    rerandomize_every: int  # trials; 0: never
+    rerandomize_fraction: float
+    w_base: float
+    rerandomize_range: float
 
     @classmethod
     def from_params(cls, p: Params) -> "Rule":
@@ -82,7 +86,8 @@ class Rule(NamedTuple):
                    p.tagging == "both_neurons", p.e_flag == "latched",
                    p.success_counter == "per_trial", p.inference == "ceiled",
                    int(p.punish_timing == "after_decay"), p.decay_counters == "per_trial",
-                   float(p.explore))
+                   float(p.explore), int(p.rerandomize_every), float(p.rerandomize_fraction),
+                   float(p.w_base), float(p.rerandomize_range))
 
 
 # ---- inference (section 2.2) -------------------------------------------------------------------
@@ -185,6 +190,25 @@ def restart_counters(punish_tagged_at, reward_tagged_at, eligible, rule):
         punish_tagged_at[:] = NEVER
         reward_tagged_at[:] = NEVER
         eligible[:] = 0
+
+
+# ---- re-randomization (the paper's section 5 proposal) -----------------------------------------
+
+@kernel
+def rerandomize(weights, trial, rule, random_state):
+    """At the start of every rerandomize_every-th trial (not the first), each synapse is re-drawn
+    with probability rerandomize_fraction to w_base + uniform [0, rerandomize_range): a way out of
+    local optima. Returns whether it was the time (the weights may then have changed)."""
+    if rule.rerandomize_every == 0 or trial == 0 or trial % rule.rerandomize_every != 0:
+        return False
+    n_neurons, n_segments, n_inputs = weights.shape
+    for n in range(n_neurons):
+        for s in range(n_segments):
+            for i in range(n_inputs):
+                if next_uniform(random_state) < rule.rerandomize_fraction:
+                    weights[n, s, i] = rule.w_base + rule.rerandomize_range * next_uniform(
+                        random_state)
+    return True
 
 
 # ---- tagging (section 2.3) ---------------------------------------------------------------------
@@ -368,10 +392,14 @@ class RLNAgent:
         for name, value in values.items():
             setattr(self, name, value)
 
-    def begin_trial(self) -> None:
-        """Counters and e flags restart with each trial (unless decay_counters="carry"); the
-        weights carry over."""
+    def begin_trial(self, trial: int, learn: bool = True) -> None:
+        """Trial `trial` of the episode (0 = the first) begins: counters and e flags restart
+        (unless decay_counters="carry"); the weights carry over, but for those a learning agent
+        re-randomizes (rerandomize_every)."""
         restart_counters(self.punish_tagged_at, self.reward_tagged_at, self.eligible, self.rule)
+        if learn:
+            with np.errstate(over="ignore"):  # the random stream wraps around by design
+                rerandomize(self.weights, trial, self.rule, self.random_state)
 
     def infer(self, spikes: np.ndarray) -> tuple[int, tuple[int, int]]:
         """(winning neuron, the dendrite winner of each neuron) for a spike vector."""

@@ -48,7 +48,7 @@ class AgentNode(GraphNode):
         spikes, reward = inbox[SPIKES], inbox[REWARD]
         if reward.trial != self.trial:  # a trial's first tick: counters restart, nothing to learn
             self.trial, self.trial_start_tick = reward.trial, reward.tick
-            self.agent.begin_trial()
+            self.agent.begin_trial(reward.trial)
         else:
             self.agent.learn(REWARD_KINDS.index(reward.kind))
         self.counter.count = reward.success_counter  # the reward node's count, for checkpoints

@@ -73,6 +73,13 @@ DESCRIPTIONS = {
     "inference": ("segment response: sum of ceil(w) or of w", INFERENCE),
     "explore": ("probability that the network WTA's winner is overruled and the other neuron "
                 "acts (a way out of local optima; the paper: 0)", (0.0, 1.0)),
+    "rerandomize_every": ("the paper's section 5 proposal: at the start of every this-many-th "
+                          "trial some synapses are re-drawn; 0: never (the paper's model)",
+                          (0, 2**31 - 1)),
+    "rerandomize_fraction": ("re-randomization: the probability that a synapse is re-drawn",
+                             (0.0, 1.0)),
+    "rerandomize_range": ("re-randomization: a re-drawn weight is w_base + uniform "
+                          "[0, rerandomize_range)", NON_NEGATIVE),
     "seed": ("the episode's seed: initial weights, initial angles", (0, 2**32 - 1)),
     "stall_timeout_s": ("seconds without progress before the graph is declared stalled",
                         POSITIVE),
