@@ -43,6 +43,8 @@ from .state_variables import (STATE_VAR_SEEDS, state_variable_runs, state_variab
 from .sensitivity import (SENSITIVITY_SEEDS, check_sweep_names, parse_grid,
                           sensitivity, sensitivity_markdown, sweep, sweep_summary_markdown,
                           write_sensitivity, write_sweep, write_sweep_report)
+from .goals import REPORT_SEEDS, SELECT_SEEDS as GOAL_SELECT_SEEDS, PLAY_EPISODES, goals_study, \
+    goals_markdown, plot_curves, write_goals
 from .report import claims_markdown, data_files_markdown, header_markdown, write_report
 
 PRESET_HELP = ("a named set of parameter values (" + ", ".join(PRESETS) + "; the command "
@@ -176,6 +178,19 @@ def cmd_all(args) -> None:
           f"in {time.perf_counter() - start:.0f} s")
 
 
+def cmd_goals(args) -> None:
+    out = Path(args.out)
+    study = goals_study(parse_seeds(args.report_seeds), parse_seeds(args.select_seeds),
+                        args.trials or TRIALS, args.episodes, out / "data" / "goals",
+                        args.report_seeds, args.select_seeds)
+    files = write_goals(study, out / "data")
+    report = out / "LEARNING.md"
+    rel = lambda p: os.path.relpath(p, report.parent)  # noqa: E731
+    figure = plot_curves(study, out / "figures" / "learning_curves.png")
+    path = write_report(report, [goals_markdown(study, rel(figure), files, rel)])
+    print(f"wrote {path}, {rel(figure)} and {len(files)} data files")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = OneLineArgumentParser(prog="python -m clnn_ros.reproduce",
                                    description=__doc__.split("\n\n")[0],
@@ -238,6 +253,18 @@ def build_parser() -> argparse.ArgumentParser:
     fg.add_argument("--out", default="out/figures", help="folder for the PNG files")
     fg.add_argument("--seeds", default=DEFAULT_SEEDS, help="seeds for the learning runs")
     fg.set_defaults(func=cmd_figures)
+
+    gl = sub.add_parser("goals", help="learning under Gymnasium's physics, out of local optima, "
+                                      "the paper's re-randomization: OUT/LEARNING.md")
+    gl.add_argument("--out", default="docs", help="folder for LEARNING.md, figures/ and data/ "
+                                                  "(finished runs are kept in data/goals/)")
+    gl.add_argument("--report-seeds", default=REPORT_SEEDS, help="seeds the report is on")
+    gl.add_argument("--select-seeds", default=GOAL_SELECT_SEEDS,
+                    help="seeds the choices are made on")
+    gl.add_argument("--trials", type=int, help=f"trials per episode (default {TRIALS})")
+    gl.add_argument("--episodes", type=int, default=PLAY_EPISODES,
+                    help="frozen-weights episodes in gymnasium per seed")
+    gl.set_defaults(func=cmd_goals)
 
     al = sub.add_parser("all", help="everything, then writes OUT/REPRODUCTION.md")
     al.add_argument("--out", default="docs",
