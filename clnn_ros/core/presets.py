@@ -30,9 +30,9 @@ PRESETS = {
          "angular_velocity_edges_deg_per_s": "-1,1", "segments": "36",
          "punish": "0.015625"}),
     "escape": Preset(
-        "the paper's physics and encoding; out of its local optima with 12 segments per neuron "
-        "and punishment twice Table 2's",
-        {"segments": "12", "punish": "0.015625"}),
+        "the paper's physics and encoding; out of its local optima with 12 segments per neuron, "
+        "twice Table 2's punishment and no reward backoff (rho_minus 0)",
+        {"segments": "12", "punish": "0.015625", "rho_minus": "0"}),
 }
 
 
