@@ -9,7 +9,7 @@ import pytest
 
 from clnn_ros.core.params import Params
 from clnn_ros.core.physics import CONTINUE, FAIL_ANGLE
-from clnn_ros.reproduce import goals
+from clnn_ros.reproduce import common, goals
 from clnn_ros.reproduce.__main__ import main
 
 
@@ -58,6 +58,7 @@ def test_goals_writes_its_report_and_resumes_without_running_again(tmp_path, mon
     def no_more_runs(*_args, **_kwargs):
         raise AssertionError("a finished run was run again")
 
+    monkeypatch.setattr(common, "run_batch", no_more_runs)
     monkeypatch.setattr(goals, "run_batch", no_more_runs)
     assert main(argv) == 0
     assert (tmp_path / "LEARNING.md").read_text() == report

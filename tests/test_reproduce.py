@@ -123,7 +123,7 @@ def test_sweep_writes_a_csv_per_configuration_and_a_summary(tmp_path, capsys):
     assert main(["sweep", "--param", "sigma=128,256", "--param", "omega=64,256", "--nsv", "1",
                  "--seeds", "0-2", "--trials", "6", "--out", str(tmp_path)]) == 0
     names = sorted(p.name for p in tmp_path.iterdir())
-    assert names == ["sweep.png", "sweep_sigma=128_omega=256.csv", "sweep_sigma=128_omega=64.csv",
+    assert names == ["runs", "sweep.png", "sweep_sigma=128_omega=256.csv", "sweep_sigma=128_omega=64.csv",
                      "sweep_sigma=256_omega=256.csv", "sweep_sigma=256_omega=64.csv",
                      "sweep_summary.csv", "sweep_summary.md"]
     _, rows = _read_csv(tmp_path / "sweep_summary.csv")
@@ -133,6 +133,22 @@ def test_sweep_writes_a_csv_per_configuration_and_a_summary(tmp_path, capsys):
     _, trials = _read_csv(tmp_path / "sweep_sigma=128_omega=64.csv")
     assert len(trials) == 3 * 6
     assert "| sigma | omega | mean steps |" in (tmp_path / "sweep_summary.md").read_text()
+
+
+def test_an_interrupted_sweep_resumes_without_running_a_finished_configuration(
+        tmp_path, capsys, monkeypatch):
+    from clnn_ros.reproduce import common
+    argv = ["sweep", "--param", "sigma=128,256", "--nsv", "1", "--seeds", "0-1", "--trials", "4",
+            "--out", str(tmp_path)]
+    assert main([argv[0], "--param", "sigma=128", *argv[3:]]) == 0  # as if stopped after it
+    first = (tmp_path / "sweep_sigma=128.csv").read_text()
+    calls = []
+    real_run_batch = common.run_batch
+    monkeypatch.setattr(common, "run_batch", lambda seeds, p: calls.append(p.sigma)
+                        or real_run_batch(seeds, p))
+    assert main(argv) == 0
+    assert calls == [256]
+    assert (tmp_path / "sweep_sigma=128.csv").read_text() == first
 
 
 @pytest.mark.parametrize("bad, message", [

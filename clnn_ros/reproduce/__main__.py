@@ -102,7 +102,7 @@ def cmd_sweep(args) -> None:
     seeds = parse_seeds(args.seeds)
     grid = parse_grid(args.param)
     check_sweep_names(grid)
-    runs = sweep(learn_params(args), grid, seeds)
+    runs = sweep(learn_params(args), grid, seeds, Path(args.out) / "runs")
     files = write_sweep(runs, Path(args.out))
     figure, summary = write_sweep_report(runs, args.seeds, Path(args.out))
     print(sweep_summary_markdown(runs))
@@ -233,7 +233,9 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--physics", default=None, help="paper (default) or correct")
     sw.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                     help="any other Params field, fixed for the whole grid")
-    sw.add_argument("--out", default="out/sweep", help="folder for the CSV files, figure, summary")
+    sw.add_argument("--out", default="out/sweep",
+                    help="folder for the CSV files, figure, summary; finished configurations are "
+                         "kept in OUT/runs/ and not run again (an interrupted sweep resumes)")
     sw.set_defaults(func=cmd_sweep)
 
     ps = sub.add_parser("presets", help="the named parameter sets that --preset NAME takes")

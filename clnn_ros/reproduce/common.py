@@ -5,12 +5,16 @@ replayed trial)."""
 from __future__ import annotations
 
 import csv
+import hashlib
+import json
+import os
 import sys
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
+from ..batch import run_batch
 from ..core.encoder import Encoder
 from ..core.episode import run_trial
 from ..core.params import Params
@@ -121,3 +125,37 @@ def trace_trial(weights: np.ndarray, angle_deg: float, p: Params, learn: bool = 
     steps, status = run_trial(agent, SuccessCounter(p), env, Encoder.from_params(p), angle_deg, p,
                               learn=learn, trace=states.append)
     return np.array(states), steps, status
+
+
+def stored(path: Path, compute) -> dict:
+    """The arrays stored at `path`, or compute()'s (a dict of arrays) stored there first, written
+    whole at once: an interrupted study or sweep resumes with what it finished."""
+    if path.exists():
+        with np.load(path) as data:
+            return dict(data)
+    arrays = compute()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_name(path.name + ".partial.npz")
+    np.savez_compressed(partial, **arrays)
+    os.replace(partial, path)
+    return arrays
+
+
+def store_path(store: Path, name: str, key) -> Path:
+    """Where a run named `name` is stored: the name made safe for a file, and a digest of `key`
+    (what the run depends on, e.g. its parameters and seeds)."""
+    safe = "".join(c if c.isalnum() else "_" for c in name)[:80]
+    digest = hashlib.sha256(json.dumps(key, sort_keys=True, default=list).encode()).hexdigest()
+    return store / f"{safe}_{digest[:16]}.npz"
+
+
+def stored_batch(p: Params, seeds, store: Path, name: str) -> dict:
+    """The batch engine's episodes (steps, end_status, final_weights) for p and seeds, or those
+    stored for the same parameters and seeds by an earlier call."""
+    seeds = np.asarray(list(seeds), dtype=np.int64)
+
+    def learn():
+        r = run_batch(seeds, p)
+        return dict(steps=r.steps, end_status=r.end_status, final_weights=r.final_weights)
+
+    return stored(store_path(store, name, [p.to_dict(), seeds.tolist()]), learn)

@@ -11,25 +11,24 @@ while its parameters and seeds are the same: an interrupted run resumes.
 
 from __future__ import annotations
 
-import hashlib
 import itertools
 import json
 import math
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import gymnasium
 import numpy as np
 
-from ..batch import BatchResult, evaluate_weights_batch, run_batch
+from ..batch import evaluate_weights_batch, run_batch
 from ..core.encoder import Encoder
 from ..core.gym_physics import gym_matched_params
 from ..core.optimal import optimal_weights
 from ..core.params import Params, params_from_strings
 from ..core.physics import CONTINUE
 from ..core.presets import preset_values
-from .common import STUCK_BELOW, md_table, progress, stuck, write_csv
+from .common import (STUCK_BELOW, md_table, progress, store_path, stored, stored_batch, stuck,
+                     write_csv)
 from .gym_eval import GYM_ID, LearnOutput, gym_eval, reset_seed
 
 # ------------------------------------------------------------------------------------------------
@@ -177,43 +176,18 @@ class Outcome:
         return np.mean(rolling >= threshold, axis=0)
 
 
-def stored(path: Path, compute) -> dict:
-    """The arrays stored at `path`, or compute() stored there first (written whole at once, so
-    that an interrupted study resumes with what it finished)."""
-    if path.exists():
-        with np.load(path) as data:
-            return dict(data)
-    arrays = compute()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    partial = path.with_name(path.name + ".partial.npz")
-    np.savez_compressed(partial, **arrays)
-    os.replace(partial, path)
-    return arrays
-
-
-def store_path(store: Path, world: str, label: str, key) -> Path:
-    name = "".join(c if c.isalnum() else "_" for c in f"{world}_{label}")[:80]
-    digest = hashlib.sha256(json.dumps(key, sort_keys=True, default=list).encode()).hexdigest()
-    return store / f"{name}_{digest[:16]}.npz"
-
-
 def run_stored(world: str, label: str, p: Params, seeds, store: Path,
                play_episodes: int = 0) -> Outcome:
     """The batch engine's episodes (and with play_episodes their final weights played frozen in
     gymnasium), or those an earlier call stored for the same parameters and seeds."""
     seeds = np.asarray(list(seeds), dtype=np.int64)
-    key = [p.to_dict(), seeds.tolist()]
-
-    def learn():
-        r: BatchResult = run_batch(seeds, p)
-        return dict(steps=r.steps, end_status=r.end_status, final_weights=r.final_weights)
-
-    data = stored(store_path(store, world, label, key), learn)
+    name = f"{world}_{label}"
+    data = stored_batch(p, seeds, store, name)
     outcome = Outcome(world, label, p, seeds, data["steps"], data["end_status"],
                       data["final_weights"])
     if play_episodes:
         outcome.play = stored(
-            store_path(store, world, label, key + ["play", play_episodes]),
+            store_path(store, name, [p.to_dict(), seeds.tolist(), "play", play_episodes]),
             lambda: dict(returns=gym_eval(LearnOutput(label, seeds, outcome.final_weights, p),
                                           play_episodes, 0)))["returns"]
     return outcome
@@ -339,8 +313,8 @@ def goals_study(report_seeds, select_seeds, trials: int, episodes: int, store: P
             gym_eval(LearnOutput(label, np.array([0]), weights[None], p), episodes, 0)[0]))
     fig7 = float(evaluate_weights_batch(optimal_weights(1), Params(nsv=1)).steps.mean())
     two_sv = min(reported["paper_2sv"][1:], key=rank)
-    kept = stored(store_path(store, "paper_2sv", "from Figure 12", [two_sv.params.to_dict(),
-                                                                     list(select_seeds)]),
+    kept = stored(store_path(store, "paper_2sv_from Figure 12", [two_sv.params.to_dict(),
+                                                                  list(select_seeds)]),
                   lambda: dict(steps=run_batch(select_seeds, two_sv.params,
                                                weights=optimal_weights(2)).steps))["steps"].mean()
     frozen_means = np.array([evaluate_weights_batch(w, two_sv.params).steps.mean()

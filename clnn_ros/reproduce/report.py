@@ -25,6 +25,9 @@ def header_markdown(runtime_s: float, seeds: list[int], seed_spec: str, option_s
         f"{os.cpu_count()} CPU cores. {len(seeds)} seeds ({seed_spec}) for the "
         f"paper's runs, {len(option_seeds)} seeds ({option_spec}) for the option table; {TRIALS} "
         f"trials per episode.\n",
+        "Beyond the paper (learning under Gymnasium's physics, out of the local optima, the "
+        "paper's re-randomization proposal measured): [LEARNING.md](LEARNING.md), made by "
+        "`python -m clnn_ros.reproduce goals`.\n",
         "Conventions: the project's `paper` defaults (`clnn_ros.core.params.Params`, see "
         "the module docstrings and the conventions note): paper physics (θ̈ too small by "
         "180/π), semi-implicit Euler, ties broken by exact sums, only the action path tagged, "

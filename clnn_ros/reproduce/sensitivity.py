@@ -12,7 +12,8 @@ import numpy as np
 
 from ..batch import run_batch
 from ..core.params import ParamError, Params, params_from_strings
-from .common import STUCK_BELOW, TRIALS, SeedMeans, md_table, progress, stuck, write_csv
+from .common import (STUCK_BELOW, TRIALS, SeedMeans, md_table, progress, stored_batch, stuck,
+                     write_csv)
 
 # ------------------------------------------------------------------------------------------------
 # Settings
@@ -56,9 +57,10 @@ def parse_grid(items: list[str]) -> dict[str, list[str]]:
     return grid
 
 
-def sweep(base: Params, grid: dict[str, list], seeds) -> list[SweepRun]:
+def sweep(base: Params, grid: dict[str, list], seeds, store: Path) -> list[SweepRun]:
     """Every combination of the grid's values (text or numbers) on top of `base`, learned on
-    `seeds`. Every configuration is validated before the first runs (ParamError)."""
+    `seeds`. Every configuration is validated before the first runs (ParamError). A finished
+    configuration is stored in `store` and not run again (an interrupted sweep resumes)."""
     names = list(grid)
     configs = []
     for combination in itertools.product(*(grid[n] for n in names)):
@@ -67,8 +69,8 @@ def sweep(base: Params, grid: dict[str, list], seeds) -> list[SweepRun]:
         configs.append(({n: getattr(p, n) for n in names}, p))
     runs = []
     for values, p in progress(configs, "sweep"):
-        result = run_batch(seeds, p)
-        runs.append(SweepRun(values, p, result.seeds, result.steps))
+        result = stored_batch(p, seeds, store, "sweep")
+        runs.append(SweepRun(values, p, np.asarray(seeds), result["steps"]))
     return runs
 
 
