@@ -72,6 +72,9 @@ ENVIRONMENTS = {
                  "`{physics}` equations, `{integrator}` integration (the built-in node's)"),
     "gymnasium": ("gymnasium's CartPole-v1 node (`python -m clnn_ros.nodes.gymnasium_env`)",
                   "gymnasium's CartPole-v1 (the run's physics parameter does not apply)"),
+    "mujoco": ("the MuJoCo cart-pole node (`python -m clnn_ros.nodes.mujoco_env`)",
+               "MuJoCo's, with gymnasium CartPole-v1's constants (the run's physics parameter "
+               "does not apply)"),
     "external": ("an external node (`run_all --env external`: started outside run_all)",
                  "the external node's own (the graph's parameter physics={physics}, which it "
                  "may ignore)"),

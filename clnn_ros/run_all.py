@@ -5,6 +5,7 @@ episode and print a summary.
     python -m clnn_ros.run_all --seed 1 --nsv 1 --trials 32 --out DIR
     python -m clnn_ros.run_all --composed            # all nodes in one process, one executor
     python -m clnn_ros.run_all --env gymnasium       # gymnasium's CartPole-v1 physics
+    python -m clnn_ros.run_all --env mujoco          # a cart-pole simulated by MuJoCo
     python -m clnn_ros.run_all --preset gymnasium    # its physics in the project's cart-pole node
     python -m clnn_ros.run_all --env-node "python examples/noisy_cartpole.py"  # your own node
 
@@ -53,7 +54,11 @@ DEMO = dict(seed=0, trials=20, nsv=1)
 # external: none is started, one started by someone else is waited for.
 ENVIRONMENTS = {"cartpole": ("clnn_ros.nodes.environment", "EnvironmentNode"),
                 "gymnasium": ("clnn_ros.nodes.gymnasium_env", "GymnasiumEnvironmentNode"),
+                "mujoco": ("clnn_ros.nodes.mujoco_env", "MujocoEnvironmentNode"),
                 "external": None}
+# The environments whose simulator steps its own tau (gymnasium's CartPole-v1, and the MuJoCo
+# plant built with its constants): one tick is one of their steps.
+OWN_TAU = {"gymnasium": GYM_PHYSICS["tau"], "mujoco": GYM_PHYSICS["tau"]}
 # Run settings that run_all sets itself: a value given would be overwritten (out_dir) or make
 # the graph wait for a participant that never comes (extra_nodes, the recorder's name).
 RUN_ALL_SETS = {"out_dir": "--out", "extra_nodes": "--bag / --no-record",
@@ -94,8 +99,9 @@ def parse_args(argv):
                         help="all nodes in one process with one executor")
     parser.add_argument("--env", choices=tuple(ENVIRONMENTS), default="cartpole",
                         help="environment node: the paper's cart-pole, gymnasium's CartPole-v1, "
-                             "or external: start none and wait (--stall-timeout) for one that "
-                             "someone else starts (a robot's; docs/ENV_CONTRACT.md)")
+                             "a cart-pole simulated by MuJoCo, or external: start none and wait "
+                             "(--stall-timeout) for one that someone else starts (a robot's; "
+                             "docs/ENV_CONTRACT.md)")
     parser.add_argument("--namespace", metavar="NAME",
                         help="put every node and topic under /NAME/ (several graphs on one "
                              "ROS domain)")
@@ -210,9 +216,9 @@ def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
             str(Path(args.init_weights).resolve())
     model = {k: v for k, v in values.items() if k not in RUN_SETTINGS}
     params = params_from_strings(model)  # raises ParamError with one line
-    gym_tau = GYM_PHYSICS["tau"]
-    if args.env == "gymnasium" and args.env_node is None and params.tau != gym_tau:
-        raise ParamError(f"--env gymnasium steps gymnasium's tau of {gym_tau:g} s, got "
+    own_tau = OWN_TAU.get(args.env)
+    if own_tau is not None and args.env_node is None and params.tau != own_tau:
+        raise ParamError(f"--env {args.env} steps {args.env}'s tau of {own_tau:g} s, got "
                          f"tau={params.tau:g}")
     if args.velocity_edge is not None and "cart_velocity" not in params.state_vars:
         raise ParamError(f"--velocity-edge needs cart_velocity among the state variables "

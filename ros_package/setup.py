@@ -14,6 +14,7 @@ HERE = Path(__file__).resolve().parent
 EXECUTABLES = {
     "environment": "clnn_ros.nodes.environment:main",
     "gymnasium_env": "clnn_ros.nodes.gymnasium_env:main",
+    "mujoco_env": "clnn_ros.nodes.mujoco_env:main",
     "encoder": "clnn_ros.nodes.encoder:main",
     "reward": "clnn_ros.nodes.reward:main",
     "agent": "clnn_ros.nodes.agent:main",

@@ -1,5 +1,6 @@
 """Session-wide test fixtures, and ROS domains of the tests' own."""
 
+import csv
 import errno
 import fcntl
 import os
@@ -8,7 +9,9 @@ import socket
 import signal
 import subprocess
 import time
+from pathlib import Path
 
+import numpy as np
 import pytest
 
 
@@ -107,6 +110,14 @@ def ros_environment(domain_id: str, tmp_path_factory) -> dict:
     ROS logs in a temporary folder."""
     return {**os.environ, "ROS_DOMAIN_ID": domain_id, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
             "ROS_LOG_DIR": str(tmp_path_factory.mktemp("ros_log"))}
+
+
+def assert_run_equals_episode(out: Path, episode) -> None:
+    """A run's out folder (trials.csv, final_weights.npy) holds the core episode's successful
+    steps, trial by trial, and its final weights."""
+    with open(out / "trials.csv") as f:
+        assert [int(row["steps"]) for row in csv.DictReader(f)] == episode.steps.tolist()
+    np.testing.assert_array_equal(np.load(out / "final_weights.npy"), episode.final_weights)
 
 
 def processes_of_test(tmp_path) -> list[int]:

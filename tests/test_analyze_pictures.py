@@ -96,6 +96,7 @@ def test_environment_lines_name_the_node_and_its_physics():
     for environment, node, physics in (
             ("cartpole", "the built-in cart-pole node", "`paper` equations"),
             ("gymnasium", "gymnasium's CartPole-v1 node", "gymnasium's CartPole-v1"),
+            ("mujoco", "the MuJoCo cart-pole node", "MuJoCo's, with gymnasium CartPole-v1's"),
             ("external", "an external node", "the external node's own"),
             ("python my_env.py", "your own node: `python my_env.py`", "the node's own")):
         data["record"] = {"environment": environment}

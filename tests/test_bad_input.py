@@ -44,7 +44,7 @@ RUN_ALL_CASES = [  # (arguments, what the one error line says)
     # command line: argparse
     (["--seed", "abc"], "argument --seed: invalid int value: 'abc'"),
     (["--unknown-flag"], "unrecognized arguments: --unknown-flag"),
-    (["--env", "mujoco"], "argument --env: invalid choice: 'mujoco'"),
+    (["--env", "bullet"], "argument --env: invalid choice: 'bullet'"),
     (["--trials"], "argument --trials: expected one argument"),
     # command line: model parameters
     (["--trials", "0"], "trials must be a positive integer below 2**31, got 0"),
@@ -68,6 +68,7 @@ RUN_ALL_CASES = [  # (arguments, what the one error line says)
     (["--nsv", "1", "--velocity-edge", "0.3"], "--velocity-edge needs cart_velocity among"),
     (["--nsv", "2", "--velocity-edge", "-1"], "velocity_edge must be > 0, got -1.0"),
     (["--env", "gymnasium", "--option", "tau=0.01"], "--env gymnasium steps gymnasium's tau"),
+    (["--env", "mujoco", "--option", "tau=0.01"], "--env mujoco steps mujoco's tau of 0.02 s"),
     # command line: run settings, paths, commands
     (["--seed", "-1"], "seed must be an integer from 0 to 2**32-1, got -1"),
     (["--seed", str(2**32)], "seed must be an integer from 0 to 2**32-1, got 4294967296"),
@@ -136,6 +137,7 @@ NODE_CASES = [  # (node, its arguments after --ros-args, what the one error line
     ("trial_manager", ["--unknown-ros-flag"], "unknown ROS arguments ['--unknown-ros-flag']"),
     ("trial_manager", ["--log-level", "loud"], "Couldn't parse log level"),
     ("gymnasium_env", ["-p", "tau:=0.01"], "tau must be gymnasium's 0.02 s"),
+    ("mujoco_env", ["-p", "tau:=0.01"], "tau must be MuJoCo's 0.02 s"),
     # a params file outside the ROS arguments (here after their end, --): rclpy ignores it
     ("agent", ["--", "--params-file", "nan.yaml"], "unexpected arguments ['--params-file'"),
 ]

@@ -6,7 +6,6 @@ parameters; `run_all --env external` runs with an environment node started by so
 
 from __future__ import annotations
 
-import csv
 import os
 import queue
 import signal
@@ -27,7 +26,7 @@ from clnn_ros.core.episode import run_episode
 from clnn_ros.core.gym_physics import GymCartPole, gym_matched_params
 from clnn_ros.core.params import ParamError, Params, params_from_strings
 
-from conftest import HANG_S, free_domain_id
+from conftest import HANG_S, assert_run_equals_episode, free_domain_id
 
 pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 ROOT = Path(__file__).resolve().parents[1]
@@ -108,9 +107,7 @@ def test_gymnasium_node_run_equals_core_on_gymnasium_physics(ros_env, tmp_path):
     assert result.returncode == 0, result.stderr
     p = Params(nsv=2, velocity_edge=0.3, trials=trials, max_steps=max_steps)
     core = run_episode(seed, p, env_factory=GymCartPole)
-    with open(tmp_path / "trials.csv") as f:
-        assert [int(r["steps"]) for r in csv.DictReader(f)] == core.steps.tolist()
-    np.testing.assert_array_equal(np.load(tmp_path / "final_weights.npy"), core.final_weights)
+    assert_run_equals_episode(tmp_path, core)
 
 
 def test_core_physics_with_gymnasium_constants_follows_gymnasium():
@@ -153,7 +150,7 @@ def test_bad_angle_edges(value, message):
 @pytest.mark.parametrize("args, message", [
     (["--env-node", "python x.py", "--composed"], "--env-node runs its own process"),
     (["--env-node", ""], "--env-node needs a command"),
-    (["--env", "mujoco"], "invalid choice: 'mujoco'"),
+    (["--env", "bullet"], "invalid choice: 'bullet'"),
     (["--env", "gymnasium", "--option", "tau=0.01"], "steps gymnasium's tau of 0.02 s"),
 ])
 def test_run_all_environment_options_are_checked(ros_env, args, message):
@@ -170,9 +167,7 @@ def test_graph_encodes_other_angle_edges_from_parameters_only(ros_env, tmp_path)
          "--out", str(tmp_path)], env=env, capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
     core = run_episode(1, Params(angle_edges_deg="-3,0,3", trials=6, max_steps=400))
-    with open(tmp_path / "trials.csv") as f:
-        assert [int(r["steps"]) for r in csv.DictReader(f)] == core.steps.tolist()
-    np.testing.assert_array_equal(np.load(tmp_path / "final_weights.npy"), core.final_weights)
+    assert_run_equals_episode(tmp_path, core)
 
 
 # --- run_all --env external -------------------------------------------------------------------
@@ -265,9 +260,7 @@ def test_external_environment_started_separately(ros_env, tmp_path, namespace):
     finally:
         end(run, environment)
     core = run_episode(seed, Params(trials=trials, max_steps=max_steps))
-    with open(out / "trials.csv") as f:
-        assert [int(r["steps"]) for r in csv.DictReader(f)] == core.steps.tolist()
-    np.testing.assert_array_equal(np.load(out / "final_weights.npy"), core.final_weights)
+    assert_run_equals_episode(out, core)
     assert (out / "bag" / "metadata.yaml").is_file()  # the recorder finished its bag
 
 

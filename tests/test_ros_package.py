@@ -168,9 +168,9 @@ def test_colcon_builds_the_package_into_an_install_tree(tmp_path):
                            timeout=600)
     assert built.returncode == 0, built.stdout + built.stderr
     install = workspace / "install" / "clnn_ros"
-    for name in ("environment", "gymnasium_env", "encoder", "reward", "agent", "trial_manager",
-                 "recorder", "run_all", "echo", "topics", "analyze", "reproduce", "check_env",
-                 "save_checkpoint"):
+    for name in ("environment", "gymnasium_env", "mujoco_env", "encoder", "reward", "agent",
+                 "trial_manager", "recorder", "run_all", "echo", "topics", "analyze", "reproduce",
+                 "check_env", "save_checkpoint"):
         assert (install / "lib" / "clnn_ros" / name).is_file(), name
     assert (install / "share" / "clnn_ros" / "package.xml").read_text() == \
         (PACKAGE_DIR / "package.xml").read_text()

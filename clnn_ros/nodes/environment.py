@@ -16,6 +16,7 @@ from clnn_ros_msgs.msg import Action, CartPoleState, TrialEvent
 from rosgraph_msgs.msg import Clock
 from visualization_msgs.msg import MarkerArray
 
+from ..core.params import ParamError
 from ..core.physics import CONTINUE, CartPole
 from ..message_fields import FAILURE_REASONS
 from ..names import ACTION, CLOCK, MARKERS, STATE, TRIAL_EVENT
@@ -42,6 +43,17 @@ class EnvironmentNode(GraphNode):
         self.state_msg.header.frame_id = FRAME  # the frame cart_position_m is measured in
         self.subscribe(Clock, CLOCK, self.on_clock)
         self.subscribe(Action, ACTION, self.on_action)
+
+    def use_simulator(self, cartpole, name: str, pole_half_length_m: float,
+                      track_limit_m: float) -> None:
+        """Swap the paper's cart-pole for another simulator with the same interface that steps
+        its own fixed tau (gymnasium's, MuJoCo's): one tick is one of its steps, so the run's
+        tau must be the simulator's. The markers draw its pole and track."""
+        if abs(cartpole.tau - self.params.tau) > 1e-12:
+            raise ParamError(f"tau must be {name}'s {cartpole.tau} s (one tick = one {name} "
+                             f"step), got {self.params.tau}")
+        self.cartpole = cartpole
+        self.markers = CartPoleMarkers(pole_half_length_m, track_limit_m)
 
     def on_clock(self, clock: Clock) -> None:
         # a whole tick (content rules: GraphNode.subscribe)

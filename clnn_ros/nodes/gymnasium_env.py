@@ -15,20 +15,15 @@ the run (cart_mass, physics, ...) do not change them. Radians become the message
 from __future__ import annotations
 
 from ..core.gym_physics import GymCartPole
-from ..core.params import ParamError
 from .environment import EnvironmentNode
 from .common import node_main
-from .markers import CartPoleMarkers
 
 
 class GymnasiumEnvironmentNode(EnvironmentNode):
     def __init__(self, **options):
         super().__init__(**options)
-        self.cartpole = GymCartPole()
-        self.markers = CartPoleMarkers(self.cartpole.env.length, self.cartpole.env.x_threshold)
-        if abs(self.cartpole.tau - self.params.tau) > 1e-12:
-            raise ParamError(f"tau must be gymnasium's {self.cartpole.tau} s (one tick = one "
-                             f"gymnasium step), got {self.params.tau}")
+        cartpole = GymCartPole()
+        self.use_simulator(cartpole, "gymnasium", cartpole.env.length, cartpole.env.x_threshold)
 
 
 def main() -> None:

@@ -63,8 +63,8 @@ class RecorderNode(Node):
         params, settings = declare_parameters(
             self, own={"bag_path": ("", "the bag directory the recorder writes"),
                        "environment": ("", "what ran as the environment node, kept in the bag "
-                                       "(run_all sets it): cartpole, gymnasium, external or "
-                                       "the --env-node command")})
+                                       "(run_all sets it): cartpole, gymnasium, mujoco, external "
+                                       "or the --env-node command")})
         bag_path = settings.pop("bag_path")
         environment = settings.pop("environment")
         if not bag_path:

@@ -1,7 +1,7 @@
 """The graph that `python -m clnn_ros.run_all` starts, one process per node, with its parameters:
 
     ros2 launch clnn_ros graph.launch.py [seed:=1] [trials:=32] [nsv:=2] [namespace:=robot1]
-        [env:=gymnasium] [out:=DIR] [params_file:=FILE] [record:=false] [bag:=DIR]
+        [env:=gymnasium|mujoco] [out:=DIR] [params_file:=FILE] [record:=false] [bag:=DIR]
 
 Each argument is run_all's option of the same name (clnn_ros.launch_plan): run_all checks them
 and makes the parameters files, here written into a temporary folder removed at shutdown.
