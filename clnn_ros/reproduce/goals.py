@@ -29,7 +29,7 @@ from ..core.physics import CONTINUE
 from ..core.presets import preset_values
 from .common import (STUCK_BELOW, md_table, progress, store_path, stored, stored_batch, stuck,
                      write_csv)
-from .gym_eval import GYM_ID, LearnOutput, gym_eval, reset_seed
+from .gym_eval import GYM_ID, FrozenPolicy, LearnOutput, gym_eval, reset_seed
 
 # ------------------------------------------------------------------------------------------------
 # Settings
@@ -41,6 +41,10 @@ CONVERGED = 9000  # ... is at least this (of the 10,000-step cap)
 GYM_TRUNCATION, GYM_SOLVED, GYM_WINDOW = 500, 475, 100  # CartPole-v1's "solved"
 PLAY_EPISODES = 100  # frozen-weights episodes in gymnasium.make("CartPole-v1"), per seed
 NEAR_OPTIMUM = 0.99  # paper 1 SV: a mean of at least this share of the Figure 7 optimum
+# The learning curves' paper 1-SV line: a 64-trial mean of at least this share of the optimum.
+# Not 0.99: the optimum's trials range from 7,114 to 7,788 steps with the start angle, so a
+# 64-trial window's mean moves by about 1 % with the angles that fall in it.
+CURVE_NEAR_OPTIMUM = 0.95
 TWO_SV_EDGE = 0.2812  # m/s: the edge where the Figure 12 weights reach the cap on all 32 angles
 GRID = {"rerandomize_every": (8, 32, 128), "rerandomize_fraction": (0.01, 0.05),
         "rerandomize_range": (1 / 128, 1.0)}  # the paper's proposal: period, fraction, range
@@ -48,7 +52,7 @@ GYM_ENCODING = {"state_vars": "pole_angle,pole_angular_velocity",
                 "angular_velocity_edges_deg_per_s": "-1,1"}
 # The three worlds of the study, each with Table 2's parameters (the grid's baseline).
 WORLDS = {
-    "gymnasium": ("Gymnasium physics, angle + angular velocity",
+    "gymnasium": ("Gymnasium physics",
                   lambda: gym_matched_params(params_from_strings(GYM_ENCODING))),
     "paper_1sv": ("paper physics, 1 SV", lambda: Params(nsv=1)),
     "paper_2sv": (f"paper physics, 2 SV, edge {TWO_SV_EDGE:g}",
@@ -272,6 +276,7 @@ class Study:
     fig7_optimum: float  # paper physics, 1 SV: the Figure 7 weights' mean over the 32 angles
     kept_fig12: float  # paper 2 SV: mean steps of episodes that learn from the Figure 12 weights
     acts_as_1sv: float  # paper 2 SV: share of learned tables that play as the 1-SV optimum
+    cells_from_fig12: float  # paper 2 SV: input patterns acted on unlike Figure 12, mean
     report_spec: str
     select_spec: str
 
@@ -313,15 +318,20 @@ def goals_study(report_seeds, select_seeds, trials: int, episodes: int, store: P
             gym_eval(LearnOutput(label, np.array([0]), weights[None], p), episodes, 0)[0]))
     fig7 = float(evaluate_weights_batch(optimal_weights(1), Params(nsv=1)).steps.mean())
     two_sv = min(reported["paper_2sv"][1:], key=rank)
-    kept = stored(store_path(store, "paper_2sv_from Figure 12", [two_sv.params.to_dict(),
+    from_fig12 = fig12_params(two_sv)
+    kept = stored(store_path(store, "paper_2sv_from Figure 12", [from_fig12.to_dict(),
                                                                   list(select_seeds)]),
-                  lambda: dict(steps=run_batch(select_seeds, two_sv.params,
+                  lambda: dict(steps=run_batch(select_seeds, from_fig12,
                                                weights=optimal_weights(2)).steps))["steps"].mean()
     frozen_means = np.array([evaluate_weights_batch(w, two_sv.params).steps.mean()
                              for w in two_sv.final_weights])
+    fig12 = fig12_cells(two_sv)
+    differing = [sum(FrozenPolicy(two_sv.params, w, 0).actions[pattern] != action
+                     for pattern, action in fig12.items()) for w in two_sv.final_weights]
     return Study(candidates, grid, reported, hand_made,
                  play_start_angles(report_seeds, episodes), fig7, float(kept),
-                 float(np.mean(np.abs(frozen_means - fig7) < 1.0)), report_spec, select_spec)
+                 float(np.mean(np.abs(frozen_means - fig7) < 1.0)), float(np.mean(differing)),
+                 report_spec, select_spec)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -365,7 +375,7 @@ def write_goals(study: Study, data: Path) -> list[Path]:
 
 def thresholds(study: Study) -> dict[str, float]:
     """Per world, the mean of the last 64 trials that counts as near the optimum."""
-    return {"gymnasium": CONVERGED, "paper_1sv": NEAR_OPTIMUM * study.fig7_optimum,
+    return {"gymnasium": CONVERGED, "paper_1sv": CURVE_NEAR_OPTIMUM * study.fig7_optimum,
             "paper_2sv": CONVERGED}
 
 
@@ -385,7 +395,7 @@ def plot_curves(study: Study, path: Path) -> Path:
                      fontsize=9)
         ax.set_xlabel("trial")
         ax.set_ylim(0, 1.02)
-        ax.legend(fontsize=6, loc="upper left")
+        ax.legend(fontsize=6, loc="lower right")
     axes[0].set_ylabel("share of seeds")
     fig.suptitle(f"Learning curves: the share of seeds near the optimum ({study.report_spec})")
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -493,7 +503,8 @@ def goals_markdown(study: Study, figure: str, files: list[Path], rel) -> str:
           f"`{rel(files[3])}` has each start angle). A pole balanced from a larger angle leaves "
           f"the cart with a velocity that an encoding without a cart input cannot see, so the "
           f"cart runs off the track (150-410 steps in the episodes we traced). The best frozen "
-          f"player among the candidates, {best_play.label}, plays {best_play.play.mean():.0f} "
+          f"player among the candidates, {best_play.label.removeprefix('best frozen play: ')}, "
+          f"plays {best_play.play.mean():.0f} "
           f"({best_play.play_solved:.1%} of seeds at {GYM_SOLVED}) but converges on "
           f"{best_play.converged:.1%}: it keeps the pole up from every start but lets the cart "
           f"drift within a few thousand steps. No configuration we found does both.\n"]
@@ -516,6 +527,16 @@ def goals_markdown(study: Study, figure: str, files: list[Path], rel) -> str:
     md += goal_2_3_4_markdown(study, n)
     md.append("Data: " + ", ".join(f"`{rel(f)}`" for f in files) + ".\n")
     return "\n".join(md)
+
+
+def fig12_params(o: Outcome) -> Params:
+    """o's parameters with Figure 12's segment count (its weights' shape)."""
+    return o.params.replace(segments=optimal_weights(2).shape[1])
+
+
+def fig12_cells(o: Outcome) -> dict:
+    """Figure 12's action for every input pattern of o's encoding."""
+    return FrozenPolicy(fig12_params(o), optimal_weights(2), 0).actions
 
 
 def goal_2_3_4_markdown(study: Study, n: int) -> list[str]:
@@ -541,13 +562,18 @@ def goal_2_3_4_markdown(study: Study, n: int) -> list[str]:
           f"{best_2sv.converged:.1%} of seeds converged. *Does a table exist?* Yes: the "
           f"Figure 12 weights reach the cap at every start angle. *Do the rules keep it?* "
           f"Yes: episodes that learn from the Figure 12 weights with that configuration "
-          f"average {study.kept_fig12:,.0f} steps (selection seeds). *Do they find it?* No: "
-          f"{study.acts_as_1sv:.0%} of its learned tables, played frozen, give exactly the 1-SV "
-          f"optimum's {study.fig7_optimum:,.0f}: they act on the angle alone, as Figure 7 does, "
-          f"and ignore the velocity. Figure 12's table acts differently in the central cells "
-          f"(with the cart slow, it pushes the way Figure 7 does not), so reaching it means "
-          f"changing several cells at once, each change alone worse: a local optimum that "
-          f"neither more punishment, exploration nor re-randomization left.\n",
+          f"average {study.kept_fig12:,.0f} steps (selection seeds). *Do they find it?* No. "
+          f"Its learned tables act unlike Figure 12's on {study.cells_from_fig12:.1f} of the "
+          f"{len(fig12_cells(best_2sv))} input patterns on average; "
+          f"{study.acts_as_1sv:.0%} of them, played frozen, give exactly the 1-SV optimum's "
+          f"{study.fig7_optimum:,.0f} (they act on the angle alone, as Figure 7 does); of the "
+          f"last {LAST_TRIALS} trials, {np.mean(best_2sv.end_status[:, -LAST_TRIALS:] == 2):.0%} "
+          f"end with the cart off the track and "
+          f"{np.mean(best_2sv.end_status[:, -LAST_TRIALS:] == 1):.0%} with the pole down. "
+          f"Figure 12's table acts against Figure 7's in the central cells (with the cart "
+          f"slow, it pushes the way Figure 7 does not), so reaching it from a table that "
+          f"balances means changing several cells at once: a local optimum that neither more "
+          f"punishment, exploration nor re-randomization left.\n",
           outcome_table([o for o in study.candidates if o.world == "paper_2sv"], False) + "\n",
           "## Goal 4: the paper's proposal, periodic re-randomization\n",
           "`rerandomize_every` trials (at a trial's start), each synapse is re-drawn with "
@@ -560,13 +586,14 @@ def goal_2_3_4_markdown(study: Study, n: int) -> list[str]:
         base, best = study.reported[w][0], study.reported[w][-1]
         verdicts.append(f"{WORLDS[w][0]}: mean {best.steps.mean():,.0f} against "
                         f"{base.steps.mean():,.0f} without, {best.converged:.1%} converged "
-                        f"against {base.converged:.1%}")
+                        f"against {base.converged:.1%}, {stuck(best.steps.mean(axis=1))} seeds "
+                        f"below {STUCK_BELOW:,} against {stuck(base.steps.mean(axis=1))}")
         if rank(best) < rank(base):
             helped.append(WORLDS[w][0])
     md.append("**Verdict**, the best grid point of each world on the report seeds: "
               + "; ".join(verdicts) + f". It beat Table 2 in {len(helped)} of {len(WORLDS)} "
-              "worlds" + (f" ({', '.join(helped)})" if helped else "") + ", and no preset "
-              "uses it: a re-drawn weight of a well-learned segment falls back to w_base, so "
-              "what it frees in a stuck seed it costs in a good one, and the grid shows the cost "
-              "growing with the fraction and the range.\n")
+              "worlds" + (f" ({'; '.join(helped)})" if helped else "") + ". Where it frees "
+              "stuck seeds it does so less than the presets' segments and punishment, and a "
+              "re-drawn weight of a well-learned segment falls back to w_base, a cost the good "
+              "seeds pay: no preset uses it.\n")
     return md
