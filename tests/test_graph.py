@@ -66,7 +66,8 @@ def test_graph_equals_core(ros_env, tmp_path, composed, nsv, options):
     {"state_vars": "pole_angle,cart_position"},
     {"state_vars": "cart_position,pole_angular_velocity,pole_angle", "first_action": "no_force",
      "physics": "integration_slip", "decay_counters": "carry", "punish_timing": "after_decay",
-     "inference": "exact", "explore": 0.002}],
+     "inference": "exact", "explore": 0.002, "rerandomize_every": 3,
+     "rerandomize_fraction": 0.3, "rerandomize_range": 1.0}],
     ids=["angle and position", "3 SV, every new open choice"])
 def test_graph_equals_core_for_other_encodings_and_choices(ros_env, tmp_path, options):
     # the encoder node encodes, the environment releases the pole, the agent learns as the core
