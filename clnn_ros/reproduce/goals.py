@@ -208,11 +208,9 @@ def preset_params(world: str, trials: int) -> Params:
 
 
 def grid_points():
-    keys = list(GRID)
-    for every in GRID[keys[0]]:
-        for fraction in GRID[keys[1]]:
-            for spread in GRID[keys[2]]:
-                yield {keys[0]: every, keys[1]: fraction, keys[2]: spread}
+    """Every combination of the GRID's values, as Params changes."""
+    for values in itertools.product(*GRID.values()):
+        yield dict(zip(GRID, values))
 
 
 def grid_label(point: dict) -> str:
