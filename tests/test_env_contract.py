@@ -28,7 +28,6 @@ from clnn_ros.core.params import ParamError, Params, params_from_strings
 
 from conftest import HANG_S, assert_run_equals_episode, free_domain_id
 
-pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 ROOT = Path(__file__).resolve().parents[1]
 BROKEN = str(Path(__file__).with_name("broken_env_node.py"))
 PY = sys.executable
@@ -81,6 +80,7 @@ def checks(ros_env):
     return {name: (p.communicate(timeout=180)[0], p.returncode) for name, p in running.items()}
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize("name", CHECKS)
 def test_checker(checks, name):
     report, status = checks[name]
@@ -95,6 +95,7 @@ def test_checker(checks, name):
 # Each graph of this module runs in a namespace of its own (but the one that tests the root
 # namespace): what a previous graph leaves in DDS discovery for a while cannot stop the next.
 
+@pytest.mark.ros
 def test_gymnasium_node_run_equals_core_on_gymnasium_physics(ros_env, tmp_path):
     trials, max_steps, seed = 12, 300, 1
     env = ros_env
@@ -159,6 +160,7 @@ def test_run_all_environment_options_are_checked(ros_env, args, message):
     assert result.returncode == 2 and message in result.stderr, result.stderr
 
 
+@pytest.mark.ros
 def test_graph_encodes_other_angle_edges_from_parameters_only(ros_env, tmp_path):
     env = ros_env
     result = subprocess.run(
@@ -224,6 +226,7 @@ def end(*processes: subprocess.Popen | None) -> None:
             process.wait(timeout=30)
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize("namespace", [None, "robot1"])  # the root namespace, /robot1
 def test_external_environment_started_separately(ros_env, tmp_path, namespace):
     """run_all --env external starts everything but the environment; the environment node,
@@ -264,6 +267,7 @@ def test_external_environment_started_separately(ros_env, tmp_path, namespace):
     assert (out / "bag" / "metadata.yaml").is_file()  # the recorder finished its bag
 
 
+@pytest.mark.ros
 def test_external_environment_that_never_comes(ros_env, tmp_path):
     """No environment node: run_all exits 1 within the stall timeout (counted once the rest of
     the graph is ready) plus a margin, with one error line that names the environment."""
@@ -296,15 +300,17 @@ def test_external_environment_that_never_comes(ros_env, tmp_path):
 READY_LISTENER = """
 import rclpy
 from std_msgs.msg import String
-from clnn_ros.nodes.common import READY_QOS
+from clnn_ros.graph import qos
+from clnn_ros.rclpy_session import qos_profile
 rclpy.init()
 node = rclpy.create_node("_ready_listener")
 node.create_subscription(String, "/waiting/_graph/ready", lambda m: print(m.data, flush=True),
-                         READY_QOS)
+                         qos_profile(qos.READY))
 rclpy.spin(node)
 """
 
 
+@pytest.mark.ros
 def test_nodes_announce_again_while_the_graph_waits(ros_env, tmp_path):
     """While the graph waits (here for an environment node that is up but never announces
     itself: tests/broken_env_node.py silent), every node that is ready announces it again and

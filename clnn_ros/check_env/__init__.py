@@ -1,0 +1,9 @@
+"""clnn-check-env (clnn_ros.check_env_node): an environment node checked against the contract of
+docs/ENV_CONTRACT.md.
+
+    rules      the contract's rules, what was found against them, the rules of a state (no ROS)
+    probe      the checked command's process and the harness node that plays the graph
+    interface  what the graph sees of the node before the first tick
+    lockstep   the harness's side of the lockstep, each state checked as it comes
+    scenario   the episode played against the node, and the rules checked at its end
+"""

@@ -1,0 +1,172 @@
+"""The rules of the environment contract (docs/ENV_CONTRACT.md) as clnn-check-env reports them,
+and the rules of a published state. In the manner of Gymnasium's env_checker, each check_*
+function checks one thing of what the node did and yields what is wrong with it (the text of a
+FAIL line); nothing when the node keeps the rule. No ROS import: a rule reads message fields,
+so RULES is read without rclpy."""
+
+from __future__ import annotations
+
+import math
+from typing import Iterable, Iterator
+
+from ..graph.fields import FAILURE_REASONS, stamp_nanoseconds, tick_nanoseconds
+from ..graph.names import ACTION, CLOCK, READY, STATE, TOPIC_TYPES, TRIAL_EVENT
+from ..process_signals import EXIT_WITH_STDIN
+
+RULES = {
+    "starts": "the command starts a node that keeps running",
+    "readiness": f"announces 'environment' on {READY} (TRANSIENT_LOCAL) once {STATE} has 3 "
+                 f"subscribers",
+    "interface": f"node 'environment' in the namespace it is given; subscribes {CLOCK}, "
+                 f"{TRIAL_EVENT}, {ACTION}; publishes {STATE} (relative names, clnn_ros_msgs "
+                 f"types, RELIABLE, VOLATILE)",
+    "sim_time": "use_sim_time is true",
+    "lockstep": "state(t) once, only after clock(t) and START(t) or action(t-1); tick t, the "
+                "trial, stamp t*tau",
+    "reset": "START resets: cart at 0 and at rest, pole at rest at initial_angle_deg, "
+             "successful_steps 0, the START's trial",
+    "successful_steps": "+1 per successful step, not for the failing one; a trial at max_steps "
+                        "ends with force 0 and the next START is accepted",
+    "failure": "failed/failure_reason: 'pole_angle' beyond angle_limit_deg, 'cart_position' "
+               "beyond track_limit_m, else not failed and ''",
+    "refusals": "refuses force_direction not in -1,0,1, an action or clock of another tick, "
+                "START mid-trial, START outside the angle limit",
+    "episode_end": "exits with status 0 on EPISODE_END",
+    "stdin_eof": f"with {EXIT_WITH_STDIN}=1, exits when its stdin reaches end of file",
+}
+NAME = "environment"  # the checked node's name
+MAX_STEPS = 60  # the cap the checked node gets; the failing trial must fail before it
+ANGLE_LIMIT_DEG, TRACK_LIMIT_M, TAU, FORCE_N = 12.0, 2.4, 0.02, 10.0  # the defaults it gets
+TAU_NS = tick_nanoseconds(TAU)
+TYPES = {topic: TOPIC_TYPES[topic] for topic in (STATE, CLOCK, TRIAL_EVENT, ACTION)}
+SHOWN_PER_RULE = 3  # FAIL lines per rule; more problems are counted
+
+
+class Abort(Exception):
+    """The node stopped answering: the remaining rules cannot be checked."""
+
+
+class Findings:
+    """The problems found per rule (the first SHOWN_PER_RULE of each, the others counted) and
+    the rules checked at all."""
+
+    def __init__(self):
+        self.problems = {rule: [] for rule in RULES}
+        self.checked = set()
+        self.more = {}  # rule: problems found beyond those shown
+
+    def fail(self, rule: str, text: str) -> None:
+        if text in self.problems[rule]:
+            return
+        if len(self.problems[rule]) < SHOWN_PER_RULE:
+            self.problems[rule].append(text)
+        else:
+            self.more[rule] = self.more.get(rule, 0) + 1
+
+    def fail_all(self, rule: str, problems: Iterable[str]) -> None:
+        for text in problems:
+            self.fail(rule, text)
+
+    def not_checked(self, rule: str, why: str) -> None:
+        """The rule was reached but could not be checked: a FAIL line that says why."""
+        self.problems[rule].append(f"not checked: {why}")
+
+    def report(self) -> bool:
+        """A PASS, FAIL or SKIP line per rule; True when every rule passes."""
+        ok = True
+        for rule, meaning in RULES.items():
+            problems = self.problems[rule]
+            if rule not in self.checked:
+                print(f"SKIP  {rule}: not checked (an earlier failure stopped the check)")
+                ok = False
+            elif problems:
+                ok = False
+                for text in problems:
+                    print(f"FAIL  {rule}: {text}")
+                if self.more.get(rule):
+                    print(f"FAIL  {rule}: ... and {self.more[rule]} more like these")
+            else:
+                print(f"PASS  {rule}: {meaning}")
+        return ok
+
+
+def check_state_of_the_tick(msg, tick: int, trial: int, after: str) -> Iterator[str]:
+    """lockstep: the state that answers `after` is the state of `tick`, of the trial of the
+    last START, stamped with the tick's sim time."""
+    if msg.tick != tick:
+        yield f"state tick {msg.tick} after {after}"
+    if msg.trial != trial:
+        yield f"state of tick {tick} has trial {msg.trial}, not {trial} (the trial of the last " \
+              f"START)"
+    stamp = stamp_nanoseconds(msg.header.stamp.sec, msg.header.stamp.nanosec)
+    if msg.tick == tick and stamp != tick * TAU_NS:
+        yield f"state of tick {tick} is stamped {stamp / 1e9:.9f} s, not tick * tau = " \
+              f"{tick * TAU:.9f} s"
+
+
+def check_finite(msg, tick: int) -> Iterator[str]:
+    """failure: every number of the state is finite."""
+    values = (msg.cart_position_m, msg.cart_velocity_m_per_s, msg.pole_angle_deg,
+              msg.pole_angular_velocity_deg_per_s)
+    if not all(math.isfinite(v) for v in values):
+        yield f"state of tick {tick} is not finite: {values}"
+
+
+def check_failure(msg) -> Iterator[str]:
+    """failure: a state is failed, with the limit it crossed as its reason, exactly when it lies
+    beyond the angle or the track limit."""
+    angle, x = abs(msg.pole_angle_deg), abs(msg.cart_position_m)
+    beyond = dict(zip(FAILURE_REASONS[1:], (angle > ANGLE_LIMIT_DEG, x > TRACK_LIMIT_M)))
+    where = f"angle {msg.pole_angle_deg:.3f} deg, x {msg.cart_position_m:.3f} m"
+    if msg.failed:
+        if msg.failure_reason not in beyond:
+            yield f"failure_reason {msg.failure_reason!r} is not 'pole_angle' or 'cart_position'"
+        elif not beyond[msg.failure_reason]:
+            yield f"failure_reason {msg.failure_reason!r} but the state is inside that limit " \
+                  f"({where})"
+    else:
+        if msg.failure_reason:
+            yield f"failure_reason {msg.failure_reason!r} on a state that is not failed"
+        if any(beyond.values()):
+            yield f"state beyond a limit not reported as failed ({where})"
+
+
+def check_reset(msg, angle: float, steps_before: int) -> Iterator[str]:
+    """reset: the state after START(angle) is the cart at 0 and at rest, the pole at rest at
+    `angle`, no successful step, not failed."""
+    if msg.successful_steps != 0:
+        yield f"successful_steps not reset at START (was {steps_before}, published " \
+              f"{msg.successful_steps})"
+    if msg.cart_position_m != 0.0 or msg.cart_velocity_m_per_s != 0.0:
+        yield f"cart not at 0 and at rest after START (x {msg.cart_position_m:g} m, dx/dt " \
+              f"{msg.cart_velocity_m_per_s:g})"
+    if abs(msg.pole_angle_deg - angle) > 1e-9 or msg.pole_angular_velocity_deg_per_s != 0.0:
+        yield f"pole not at rest at START's initial_angle_deg {angle:g} (angle " \
+              f"{msg.pole_angle_deg:g} deg, rate {msg.pole_angular_velocity_deg_per_s:g} deg/s)"
+    if msg.failed:
+        yield "the state after START is failed"
+
+
+def check_step_counted(msg, steps_before: int, tick: int, trial: int) -> Iterator[str]:
+    """successful_steps: one more than before for a successful step, none for the failing one."""
+    expected = steps_before + (not msg.failed)
+    if msg.successful_steps != expected:
+        what = "counts the failing step" if msg.failed and \
+            msg.successful_steps == steps_before + 1 else f"expected {expected}"
+        yield f"successful_steps {msg.successful_steps} at tick {tick} of trial {trial}: {what}"
+
+
+def check_capped(msg) -> Iterator[str]:
+    """successful_steps: a trial never counts past max_steps."""
+    if msg.successful_steps > MAX_STEPS:
+        yield f"successful_steps {msg.successful_steps} passed max_steps {MAX_STEPS}"
+
+
+def check_one_state_per_tick(states) -> Iterator[str]:
+    """lockstep: no tick has two states."""
+    seen = {}
+    for msg in states:
+        seen[msg.tick] = seen.get(msg.tick, 0) + 1
+    for tick, count in sorted(seen.items()):
+        if count > 1:
+            yield f"publishes {count} states for tick {tick}"
