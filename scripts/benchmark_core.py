@@ -3,11 +3,15 @@ pure-Python reference core and of Gymnasium's CartPole-v1 environment alone (no 
 measured in this one run, plus the wall time of the paper's full 1-SV set (32 seeds x 512 trials)
 with the compile time reported separately.
 
-    python scripts/benchmark_core.py [--out docs/benchmark_core.md] [--against REV]
+    python scripts/benchmark_core.py [--out docs/benchmark_core.md] [--against REV] [--threads 1,2]
 
 --against REV also times the batch engine of an earlier commit (its whole clnn_ros package, as
 `git archive` gives it) on the same full sets, in the same run: each engine in fresh processes,
 taking turns, so that both see the same machine load.
+
+--threads: the numba thread counts (NUMBA_NUM_THREADS) each engine runs the full sets with, in
+the same turns; one thread is the engine's speed per core, 1 and 2 give its scaling from one
+thread to two (default 1,2).
 
 An agent-step is one tick: encode, infer, tag, physics step, reward and update. Gymnasium's
 figure is an environment step alone, with a fixed action, as a yardstick for "how fast can a
@@ -30,6 +34,7 @@ SEEDS, TRIALS = 32, 512  # the paper's full set
 CORE_STEPS = 200_000  # enough for a stable rate of the slow reference
 GYM_STEPS = 200_000
 REPEATS = 3  # best of, for the batch engine's full set
+THREADS = (1, 2)
 
 
 def compile_seconds() -> float:
@@ -45,27 +50,30 @@ def compile_seconds() -> float:
     return float(out.split()[-1])
 
 
-def full_set_seconds(package_root: Path, nsv: int) -> tuple[float, int]:
+def full_set_seconds(package_root: Path, nsv: int, threads: int) -> tuple[float, int]:
     """(wall s, ticks) of one full set by the batch engine of the clnn_ros package in
-    package_root, in a fresh process, once its compiled code is loaded."""
+    package_root on `threads` numba threads, in a fresh process, once its compiled code is
+    loaded."""
     code = ("import sys, time; from clnn_ros.batch import run_batch;"
             "from clnn_ros.core.params import Params;"
             f"p = Params(nsv={nsv}, trials={TRIALS});"
             "run_batch([0], p.replace(trials=1, max_steps=1));"
             f"t = time.perf_counter(); r = run_batch(range({SEEDS}), p);"
             "print(time.perf_counter() - t, r.steps.sum() + r.steps.size)")
-    env = {**os.environ, "PYTHONPATH": str(package_root)}
+    env = {**os.environ, "PYTHONPATH": str(package_root), "NUMBA_NUM_THREADS": str(threads)}
     out = subprocess.run([sys.executable, "-c", code], env=env, cwd=package_root, check=True,
                          text=True, capture_output=True).stdout.split()
     return float(out[-2]), int(out[-1])  # the failing step is a tick too
 
 
-def best_full_sets(roots: dict[str, Path], nsv: int) -> dict[str, tuple[float, int]]:
-    """Best of REPEATS (wall s, ticks) of each engine, the engines taking turns."""
-    best = {name: (float("inf"), 0) for name in roots}
+def best_full_sets(roots: dict[str, Path], nsv: int,
+                   threads: tuple[int, ...]) -> dict[tuple[str, int], tuple[float, int]]:
+    """Best of REPEATS (wall s, ticks) of each engine on each thread count, keyed by (engine,
+    threads), the engines and thread counts taking turns."""
+    best = {(name, n): (float("inf"), 0) for n in threads for name in roots}
     for _ in range(REPEATS):
-        for name, root in roots.items():
-            best[name] = min(best[name], full_set_seconds(root, nsv))
+        for key in best:
+            best[key] = min(best[key], full_set_seconds(roots[key[0]], nsv, key[1]))
     return best
 
 
@@ -103,17 +111,34 @@ def gymnasium_rate() -> float:
     return GYM_STEPS / (time.perf_counter() - start)
 
 
-def comparison(sets: dict, rev: str) -> list[str]:
+def comparison(sets: dict, rev: str, threads: tuple[int, ...]) -> list[str]:
     """The markdown lines that set this engine's full-set times beside those of commit `rev`."""
     lines = [f"This engine and the batch engine of commit `{rev}`, the same full sets in the same "
-             f"run (fresh processes taking turns, best of {REPEATS} each):",
+             f"run (fresh processes taking turns, best of {REPEATS} each); speed-up: {rev}'s "
+             f"time over this engine's, on as many threads:",
              "",
-             f"| set | this engine | {rev} | ratio | same ticks |",
-             "|---|---:|---:|---:|---|"]
+             f"| set | threads | this engine | {rev} | speed-up | same ticks |",
+             "|---|---:|---:|---:|---:|---|"]
     for nsv, best in sets.items():
-        (wall, ticks), (wall_then, ticks_then) = best["this"], best[rev]
-        lines.append(f"| {nsv} SV | {wall:.2f} s | {wall_then:.2f} s | {wall / wall_then:.2f} | "
-                     f"{'yes' if ticks == ticks_then else f'no: {ticks:,} vs {ticks_then:,}'} |")
+        for n in threads:
+            (wall, ticks), (wall_then, ticks_then) = best["this", n], best[rev, n]
+            same = "yes" if ticks == ticks_then else f"no: {ticks:,} vs {ticks_then:,}"
+            lines.append(f"| {nsv} SV | {n} | {wall:.2f} s | {wall_then:.2f} s | "
+                         f"**{wall_then / wall:.2f}** | {same} |")
+    return [*lines, ""]
+
+
+def scaling(sets: dict, names: list[str], threads: tuple[int, ...]) -> list[str]:
+    """The markdown lines of each engine's speed-up from one thread to the most threads."""
+    if len(threads) < 2 or 1 not in threads:
+        return []
+    most = max(threads)
+    heads = ["this engine" if name == "this" else name for name in names]
+    lines = [f"From 1 thread to {most} (the one-thread time over the {most}-thread time, same "
+             f"run):", "", "| set | " + " | ".join(heads) + " |", "|---|" + "---:|" * len(names)]
+    for nsv, best in sets.items():
+        lines.append(f"| {nsv} SV | " + " | ".join(
+            f"{best[name, 1][0] / best[name, most][0]:.2f}" for name in names) + " |")
     return [*lines, ""]
 
 
@@ -122,7 +147,15 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("docs/benchmark_core.md"))
     parser.add_argument("--against", metavar="REV",
                         help="also time the batch engine of this earlier commit")
+    parser.add_argument("--threads", default=",".join(map(str, THREADS)), metavar="N,N",
+                        help="numba thread counts to run the full sets with (default %(default)s)")
     args = parser.parse_args()
+    try:
+        threads = tuple(sorted({int(n) for n in args.threads.split(",")}))
+    except ValueError:
+        threads = ()
+    if not threads or min(threads) < 1:
+        parser.error(f"--threads: positive integers separated by commas, got {args.threads!r}")
 
     load = os.getloadavg()[0]  # others' processes share the cores: say how busy they were
     with tempfile.TemporaryDirectory() as earlier:
@@ -133,15 +166,18 @@ def main() -> None:
             except subprocess.CalledProcessError as error:
                 parser.error(f"--against {args.against}: {error.stderr.decode().strip()}")
         compile_s = compile_seconds()
-        sets = {nsv: best_full_sets(roots, nsv) for nsv in (1, 2)}
-    (wall_1sv, ticks_1sv), (wall_2sv, ticks_2sv) = sets[1]["this"], sets[2]["this"]
+        sets = {nsv: best_full_sets(roots, nsv, threads) for nsv in (1, 2)}
+    most = max(threads)
+    (wall_1sv, ticks_1sv), (wall_2sv, ticks_2sv) = sets[1]["this", most], sets[2]["this", most]
     core = core_rate()
     gym = gymnasium_rate()
-    batch = ticks_1sv / wall_1sv
-    rows = [
-        ("batch engine (numba, 2 threads), 1 SV", f"{batch:,.0f}", f"{batch / gym:,.1f}"),
-        ("batch engine (numba, 2 threads), 2 SV", f"{ticks_2sv / wall_2sv:,.0f}",
-         f"{ticks_2sv / wall_2sv / gym:,.1f}"),
+    rows = []
+    for n in threads:
+        for nsv in (1, 2):
+            wall, ticks = sets[nsv]["this", n]
+            rows.append((f"batch engine (numba, {n} thread{'s' if n > 1 else ''}), {nsv} SV",
+                         f"{ticks / wall:,.0f}", f"{ticks / wall / gym:,.1f}"))
+    rows += [
         ("reference core (pure Python + numpy), 1 SV", f"{core:,.0f}", f"{core / gym:,.2f}"),
         ("Gymnasium CartPole-v1 env.step alone", f"{gym:,.0f}", "1.0"),
     ]
@@ -149,7 +185,8 @@ def main() -> None:
         "# Benchmark: the model without ROS",
         "",
         f"Generated by `python scripts/benchmark_core.py"
-        f"{' --against ' + args.against if args.against else ''}` on {platform.node()} "
+        f"{' --against ' + args.against if args.against else ''}"
+        f"{' --threads ' + args.threads if threads != THREADS else ''}` on {platform.node()} "
         f"({os.cpu_count()} cores, Python {platform.python_version()}, load average {load:.1f} "
         f"at the start), all rates measured in one run.",
         "",
@@ -158,11 +195,13 @@ def main() -> None:
         *[f"| {a} | {b} | {c} |" for a, b, c in rows],
         "",
         f"* Full 1-SV set, {SEEDS} seeds x {TRIALS} trials ({ticks_1sv:,} ticks): "
-        f"**{wall_1sv:.2f} s** wall (best of {REPEATS}; target <= 3 s).",
+        f"**{wall_1sv:.2f} s** wall on {most} thread{'s' if most > 1 else ''} (best of "
+        f"{REPEATS}; target <= 3 s).",
         f"* Full 2-SV set, literal velocity edge ({ticks_2sv:,} ticks): {wall_2sv:.2f} s wall.",
         f"* Numba compile time, paid once (then cached on disk): {compile_s:.1f} s.",
         "",
-        *(comparison(sets, args.against) if args.against else []),
+        *(comparison(sets, args.against, threads) if args.against else []),
+        *scaling(sets, list(roots), threads),
     ])
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(text)
