@@ -15,7 +15,7 @@ from typing import Callable
 import numpy as np
 
 from .figures import END_COLORS, END_LABELS, _save as save, plt
-from .message_fields import END_REASONS
+from .graph.fields import END_REASONS
 
 WINDOW_TICKS = 200     # a raster window: at this width every tick stays a visible column
 OVERVIEW_BINS = 400    # a whole trial in at most this many columns (a 10,000-tick one too)

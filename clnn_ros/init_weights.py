@@ -41,12 +41,14 @@ class EpisodeStart:
         return SuccessCounter(params) if self.resume is None else restore_counter(self.resume)
 
 
-def episode_start(setting: str, seed: int, params: Params) -> EpisodeStart:
+def episode_start(setting: str, seed: int, params: Params,
+                  compared: tuple[str, ...] | None = None) -> EpisodeStart:
     """The start that `setting` names for an episode of `seed` and `params`; CheckpointError (a
-    ParamError) with one line for a name or file that does not fit them."""
+    ParamError) with one line for a name or file that does not fit them. `compared`: the
+    parameters a resumed checkpoint must agree on (a node's own; None: all)."""
     if setting.endswith(".npz"):
         checkpoint = load_checkpoint(setting)
-        check_resumable(checkpoint, params, seed)
+        check_resumable(checkpoint, params, seed, compared)
         return EpisodeStart(resume=checkpoint)
     return EpisodeStart(weights=load_weights(setting, params) if setting else None)
 

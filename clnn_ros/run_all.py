@@ -32,37 +32,20 @@ from pathlib import Path
 
 import yaml
 
-from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
-
 from . import bag
 from .cli import OneLineArgumentParser
-from .files import cannot_create
 from .core.checkpoint import Checkpoint, load_checkpoint
-from .core.gym_physics import GYM_PHYSICS
-from .core.params import STATE_NAMES, ParamError, Params, params_from_strings
-from .core.presets import PRESETS, overlay_values, preset_values
+from .core.params import STATE_NAMES, ParamError, Params
+from .core.presets import PRESETS
+from .files import cannot_create
+from .graph.names import GRAPH_NODES, NOT_STARTED, RECORDER, TRIAL_MANAGER, namespace_problem
+from .graph.run import (DEMO, ENVIRONMENTS, OWN_TAU, RUN_SETTINGS, default_bag_path,
+                        node_arguments, run_values, write_params)
 from .init_weights import OPTIMAL, episode_start
-from .names import GRAPH_NODES, NOT_STARTED, RECORDER, RUN_SETTINGS, TRIAL_MANAGER
-from .nodes.common import EXIT_WITH_STDIN, catch_signals
-from .nodes.parameters import convert_setting, read_params_file
+from .process_signals import EXIT_WITH_STDIN, catch_signals
 from .supervise import Supervisor, say
 
 NODES = (*GRAPH_NODES, TRIAL_MANAGER)
-# The demonstration: seed 0 goes from 32 steps to the 10,000 cap by trial 11 (about 80k ticks).
-DEMO = dict(seed=0, trials=20, nsv=1)
-# --env: the environment node (docs/ENV_CONTRACT.md): module and class for composed mode;
-# external: none is started, one started by someone else is waited for.
-ENVIRONMENTS = {"cartpole": ("clnn_ros.nodes.environment", "EnvironmentNode"),
-                "gymnasium": ("clnn_ros.nodes.gymnasium_env", "GymnasiumEnvironmentNode"),
-                "mujoco": ("clnn_ros.nodes.mujoco_env", "MujocoEnvironmentNode"),
-                "external": None}
-# The environments whose simulator steps its own tau (gymnasium's CartPole-v1, and the MuJoCo
-# plant built with its constants): one tick is one of their steps.
-OWN_TAU = {"gymnasium": GYM_PHYSICS["tau"], "mujoco": GYM_PHYSICS["tau"]}
-# Run settings that run_all sets itself: a value given would be overwritten (out_dir) or make
-# the graph wait for a participant that never comes (extra_nodes, the recorder's name).
-RUN_ALL_SETS = {"out_dir": "--out", "extra_nodes": "--bag / --no-record",
-                "external_nodes": "--env external"}
 # --env-node: a command starting with one of these runs with run_all's interpreter (its venv).
 PYTHON_NAMES = ("python", "python3")
 # After the episode ends or Ctrl-C, how long the nodes get to exit by themselves, and then the
@@ -97,7 +80,7 @@ def parse_args(argv):
                         help="a ROS 2 parameters YAML (/**: ros__parameters: ...); options win")
     parser.add_argument("--composed", action="store_true",
                         help="all nodes in one process with one executor")
-    parser.add_argument("--env", choices=tuple(ENVIRONMENTS), default="cartpole",
+    parser.add_argument("--env", choices=ENVIRONMENTS, default="cartpole",
                         help="environment node: the paper's cart-pole, gymnasium's CartPole-v1, "
                              "a cart-pole simulated by MuJoCo, or external: start none and wait "
                              "(--stall-timeout) for one that someone else starts (a robot's; "
@@ -171,26 +154,10 @@ def graph_namespace(args) -> str:
     return "/" + args.namespace.strip("/") if args.namespace else "/"
 
 
-def namespace_problem(name: str) -> str | None:
-    """Why `name` is not a ROS namespace (tokens of letters, digits and _, not starting with a
-    digit, separated by /), or None."""
-    tokens = name.strip("/").split("/")
-    if not name.strip("/") or not all(t and (t[0].isalpha() or t[0] == "_") and
-                                      all(c.isalnum() or c == "_" for c in t) and t.isascii()
-                                      for t in tokens):
-        return "expected letters, digits and _ (not starting with a digit), '/' between levels"
-    return None
-
-
 def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
-    """The parameter values every node gets, validated here before any node starts. Defaults:
-    the demonstration's, or a resumed checkpoint's seed and parameters; then, each over the one
-    before, the preset, the params file, the options and the flags."""
-    values = dict(DEMO) if checkpoint is None else checkpoint_values(checkpoint)
-    if args.preset is not None:
-        values = overlay_values(values, preset_values(args.preset))
-    if args.params_file is not None:
-        values = overlay_values(values, read_params_file(args.params_file))
+    """The run's values (graph.run.run_values), checked before any node starts. Defaults: the
+    demonstration's, or a resumed checkpoint's seed and parameters; then the preset, the params
+    file, the options and the flags."""
     options = {}
     for item in args.option:
         key, sep, value = item.partition("=")
@@ -199,23 +166,21 @@ def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
         try:
             options[key.strip()] = yaml.safe_load(value)
         except yaml.YAMLError:
-            options[key.strip()] = value  # not YAML: the text, which the check below refuses
-    values = overlay_values(values, options)
-    flags = (("seed", args.seed), ("trials", args.trials), ("nsv", args.nsv),
-             ("state_vars", args.state_vars),
-             ("physics", args.physics), ("velocity_edge", args.velocity_edge),
-             ("max_steps", args.max_steps), ("stall_timeout_s", args.stall_timeout))
-    values = overlay_values(values, {key: value for key, value in flags if value is not None})
-    for name, option in RUN_ALL_SETS.items():
-        if name in values:
-            raise ParamError(f"{name} is set by run_all ({option}), not as a parameter")
+            options[key.strip()] = value  # not YAML: the text, which the check refuses
+    flags = {key: value for key, value in (
+        ("seed", args.seed), ("trials", args.trials), ("nsv", args.nsv),
+        ("state_vars", args.state_vars), ("physics", args.physics),
+        ("velocity_edge", args.velocity_edge), ("max_steps", args.max_steps),
+        ("stall_timeout_s", args.stall_timeout)) if value is not None}
     if args.quiet:
-        values["progress"] = False
+        flags["progress"] = False
     if args.init_weights:  # the nodes get a file by its full path
-        values["init_weights"] = args.init_weights if args.init_weights in OPTIMAL else \
+        flags["init_weights"] = args.init_weights if args.init_weights in OPTIMAL else \
             str(Path(args.init_weights).resolve())
-    model = {k: v for k, v in values.items() if k not in RUN_SETTINGS}
-    params = params_from_strings(model)  # raises ParamError with one line
+    if args.env_node is None and args.env != "external":
+        flags["simulator"] = args.env
+    values, params = run_values(DEMO if checkpoint is None else checkpoint_values(checkpoint),
+                                args.preset, args.params_file, options, flags)
     own_tau = OWN_TAU.get(args.env)
     if own_tau is not None and args.env_node is None and params.tau != own_tau:
         raise ParamError(f"--env {args.env} steps {args.env}'s tau of {own_tau:g} s, got "
@@ -223,12 +188,6 @@ def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
     if args.velocity_edge is not None and "cart_velocity" not in params.state_vars:
         raise ParamError(f"--velocity-edge needs cart_velocity among the state variables "
                          f"(this run encodes {','.join(params.state_vars)})")
-    # The nodes get the checked values: rcl refuses e.g. a list mixing ints and floats.
-    values.update({k: list(v) if isinstance(v, tuple) else v
-                   for k, v in params.to_dict().items() if k in model})
-    values["nsv"] = params.nsv  # the count --state-vars gives
-    for key in set(values) & set(RUN_SETTINGS):
-        values[key] = convert_setting(key, values[key])
     # what each node will do with init_weights, here first: one line for what does not fit
     episode_start(values.get("init_weights", ""), values["seed"], params)
     return values
@@ -242,28 +201,6 @@ def checkpoint_values(checkpoint: Checkpoint) -> dict:
             "nsv": checkpoint.params.nsv}
 
 
-def write_params(path: Path, values: dict) -> Path:
-    """A params file that gives every node these values."""
-    path.write_text(yaml.safe_dump({"/**": {"ros__parameters": values}}))
-    return path
-
-
-def clock_remappings(namespace: str) -> list[tuple[str, str]]:
-    """The sim clock moved into the namespace (use_sim_time subscribes to the absolute /clock)."""
-    return [("/clock", f"{namespace}/clock")] if namespace != "/" else []
-
-
-def ros_arguments(params_file: Path, namespace: str) -> list[str]:
-    """The --ros-args of every node of the run: the parameters, and the namespace with the sim
-    clock moved into it."""
-    arguments = ["--ros-args", "--params-file", str(params_file), "--log-level", "warn"]
-    if namespace != "/":
-        arguments += ["-r", f"__ns:={namespace}"]
-    for old, new in clock_remappings(namespace):
-        arguments += ["-r", f"{old}:={new}"]
-    return arguments
-
-
 def child_environment() -> dict:
     return {**os.environ, EXIT_WITH_STDIN: "1"}
 
@@ -274,7 +211,7 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
     """Start the nodes (env_command None: no environment) and watch them until the trial
     manager ends. Returns (its exit status, or 128 + signal; whether run_all saw a process fail
     itself, and said so: one that exited with an error or a signal)."""
-    arguments = ros_arguments(write_params(workdir / "params.yaml", values), namespace)
+    arguments = node_arguments(write_params(workdir / "params.yaml", values), namespace)
     for name in NODES:
         command = env_command if name == "environment" else \
             [sys.executable, "-m", f"clnn_ros.nodes.{name}"]
@@ -336,43 +273,6 @@ def warn_forced(forced: list[tuple[str, str]]) -> None:
                 f"killed")
 
 
-def run_composed(values: dict, environment: str | None, namespace: str,
-                 interrupted: list[int], supervisor: Supervisor) -> tuple[int, str | None]:
-    """All nodes in this process on one executor. Returns the trial manager's exit status (or
-    128 + signal) and its reason."""
-    import importlib
-    from .nodes.agent import AgentNode
-    from .nodes.common import init_ros, spin_until_finished
-    from .nodes.encoder import EncoderNode
-    from .nodes.reward import RewardNode
-    from .nodes.trial_manager import TrialManagerNode
-    import rclpy
-    classes = [EncoderNode, RewardNode, AgentNode, TrialManagerNode]
-    if environment is not None:
-        module, name = ENVIRONMENTS[environment]
-        classes.insert(0, getattr(importlib.import_module(module), name))
-    init_ros([sys.argv[0]])
-    nodes = []
-    try:
-        options = dict(overrides=values, namespace=None if namespace == "/" else namespace,
-                       cli_args=["--ros-args", *(arg for old, new in clock_remappings(namespace)
-                                                 for arg in ("-r", f"{old}:={new}"))]
-                       if namespace != "/" else None)
-        for cls in classes:
-            nodes.append(cls(**options))
-        spin_until_finished(nodes, nodes[-1].finished, interrupted)
-        if interrupted:
-            for node in nodes:
-                node.interrupted()
-            return 128 + interrupted[0], None
-        return nodes[-1].finished.result(), nodes[-1].exit_reason
-    finally:
-        supervisor.note_files()  # the ports these nodes write to, which their end unmaps
-        for node in nodes:
-            node.destroy_node()
-        rclpy.try_shutdown()
-
-
 def start_recorder(supervisor: Supervisor, values: dict, bag_path: Path, workdir: Path,
                    namespace: str, environment: str) -> None:
     """The recorder: its own process, also in composed mode; OSError if the bag's directory
@@ -381,7 +281,7 @@ def start_recorder(supervisor: Supervisor, values: dict, bag_path: Path, workdir
     params_file = write_params(workdir / "recorder_params.yaml", {
         **values, "bag_path": str(bag_path), "environment": environment})
     supervisor.start(RECORDER, [sys.executable, "-m", "clnn_ros.nodes.recorder",
-                                *ros_arguments(params_file, namespace)], child_environment())
+                                *node_arguments(params_file, namespace)], child_environment())
 
 
 def stop_recorder(supervisor: Supervisor, episode_ended: bool) -> bool:
@@ -391,13 +291,6 @@ def stop_recorder(supervisor: Supervisor, episode_ended: bool) -> bool:
     forced = supervisor.stop([RECORDER], RECORDER_GRACE_S, interrupt=not episode_ended)
     warn_forced(forced)
     return bool(forced)
-
-
-def default_bag_path(out_dir: Path | None) -> Path:
-    """<out>/bag with --out, else bags/run_<UTC time> under the current directory."""
-    if out_dir is not None:
-        return Path(out_dir) / "bag"
-    return Path("bags") / time.strftime("run_%Y%m%d_%H%M%S", time.gmtime())
 
 
 def fresh_summary(out: Path, since: float) -> dict:
@@ -428,7 +321,7 @@ def main(argv=None) -> int:
         if env_command[0] in PYTHON_NAMES:
             env_command[0] = sys.executable
     elif environment is not None:
-        env_command = [sys.executable, "-m", ENVIRONMENTS[environment][0]]
+        env_command = [sys.executable, "-m", "clnn_ros.nodes.environment"]
     else:
         values["external_nodes"] = "environment"
     interrupted = catch_signals()
@@ -466,8 +359,9 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
                   f"rest is ready)", flush=True)
         failed = recorder_forced = False
         if args.composed:
-            status, reason = run_composed(values, environment, namespace, interrupted,
-                                          supervisor)
+            from .composed import run_composed  # loads rclpy and the nodes
+            status, reason = run_composed(values, environment is not None, namespace,
+                                          interrupted, supervisor.note_files)
         else:
             status, failed = run_separate(supervisor, values, Path(tmp), env_command,
                                           namespace, interrupted, began)

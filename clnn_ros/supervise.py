@@ -3,7 +3,7 @@ exits is known at once (its exit status or signal and the last lines of its stde
 guessed from silence; and the children end when run_all ends, even killed with SIGKILL.
 
 Each child gets a pipe on stdin that run_all never writes to (a node sees its end of file when
-run_all is gone: nodes.common.EXIT_WITH_STDIN) and its stderr is read by a thread that passes
+run_all is gone: process_signals.EXIT_WITH_STDIN) and its stderr is read by a thread that passes
 each line on to run_all's stderr and keeps the last ones. The Fast DDS shared-memory files the
 children use are noted while they run, and removed after the end if no process uses them then
 (a killed process cannot remove its own): those of this run's processes, never another's. If
@@ -28,7 +28,7 @@ from .rosenv import (own_fast_dds_files, remove_files_of_dead_process,
 TAIL_LINES = 5
 _STDERR = threading.Lock()
 # A node whose Python code runs stops within this of SIGTERM: its spin loop's 0.1 s, the wait
-# for its last messages' acknowledgements (nodes.common.ACK_WAIT_S, 2 s: a killed subscriber
+# for its last messages' acknowledgements (nodes.glue.ACK_WAIT_S, 2 s: a killed subscriber
 # never acknowledges) and its participant's deletion.
 TERMINATE_S = 5.0
 SAMPLE_S = 0.5  # how often the children's shared-memory files are noted

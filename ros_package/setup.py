@@ -13,8 +13,6 @@ HERE = Path(__file__).resolve().parent
 # `ros2 run clnn_ros <executable>`: every node, then the user's commands (pyproject's scripts)
 EXECUTABLES = {
     "environment": "clnn_ros.nodes.environment:main",
-    "gymnasium_env": "clnn_ros.nodes.gymnasium_env:main",
-    "mujoco_env": "clnn_ros.nodes.mujoco_env:main",
     "encoder": "clnn_ros.nodes.encoder:main",
     "reward": "clnn_ros.nodes.reward:main",
     "agent": "clnn_ros.nodes.agent:main",

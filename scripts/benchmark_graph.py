@@ -23,7 +23,7 @@ the ring's, the benchmark's own).
    publishes once it holds its inputs of the tick, as the graph's nodes do. std_msgs/UInt64
    messages (the transport yardstick) and the graph's own message types with fixed content.
    The ring runs under the same rosenv defaults (its Fast DDS profile file), with the graph's
-   QoS object (clnn_ros.nodes.common.LOCKSTEP_QOS, from clnn_ros.qos.LOCKSTEP; the report
+   QoS object (clnn_ros.nodes.common.LOCKSTEP_QOS, from clnn_ros.graph.qos.LOCKSTEP; the report
    states its depth) and the graph's executor
    factory (clnn_ros.nodes.common.make_executor, CLNN_ROS_EXECUTOR). EventsExecutor (the
    default) and rclpy's SingleThreadedExecutor (CLNN_ROS_EXECUTOR=single). Every configuration

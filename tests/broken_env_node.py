@@ -10,32 +10,43 @@ states at tick 50 but stays alive), crash (raises at start).
 
 import sys
 
-from clnn_ros.nodes.common import node_main
+from clnn_ros.graph.fields import tick_stamp
 from clnn_ros.nodes.environment import EnvironmentNode
+from clnn_ros.nodes.glue import run_node
 from clnn_ros_msgs.msg import Action, TrialEvent
 
 BUGS = set(sys.argv.pop(1).split(","))
 
 
 class BrokenEnvironmentNode(EnvironmentNode):
-    def __init__(self, **options):
+    def __init__(self, run: dict, **options):
         if "crash" in BUGS:
             raise RuntimeError("a bug at start")
-        super().__init__(**options)
+        super().__init__(run, **options)
         if "silent" in BUGS:
-            self._ready_timer.cancel()
+            self.readiness.cancel()
+        refuse, publish = self.refusals.refuse, self.state_pub.publish
+
+        def accept_bad_force(topic: str, msg, reason: str, kind: str = "tick") -> None:
+            if "accept_bad_force" in BUGS and isinstance(msg, Action) and \
+                    msg.force_direction == 5:
+                msg.force_direction = 1  # ignores the content rules' verdict
+                self.on_action(msg)
+                return
+            refuse(topic, msg, reason, kind)
+
+        def publish_wrong_tick(msg) -> None:
+            if "wrong_tick" in BUGS and msg.tick >= 2:
+                msg.tick += 1
+                msg.header.stamp.sec, msg.header.stamp.nanosec = tick_stamp(msg.tick,
+                                                                            self.tau_ns)
+            publish(msg)
+        self.refusals.refuse, self.state_pub.publish = accept_bad_force, publish_wrong_tick
 
     def on_trial_event(self, event: TrialEvent) -> None:
         if "no_exit" in BUGS and event.event == TrialEvent.EPISODE_END:
             return
         super().on_trial_event(event)
-
-    def refuse(self, topic: str, msg, reason: str, kind: str = "tick") -> None:
-        if "accept_bad_force" in BUGS and isinstance(msg, Action) and msg.force_direction == 5:
-            msg.force_direction = 1  # ignores the content rules' verdict
-            super().on_action(msg)
-            return
-        super().refuse(topic, msg, reason, kind)
 
     @property
     def successful_steps(self) -> int:
@@ -53,11 +64,6 @@ class BrokenEnvironmentNode(EnvironmentNode):
             return
         super()._advance()
 
-    def stamp(self, msg, tick: int, trial: int):
-        if "wrong_tick" in BUGS and tick >= 2:
-            tick += 1
-        return super().stamp(msg, tick, trial)
-
 
 if __name__ == "__main__":
-    raise SystemExit(node_main(BrokenEnvironmentNode))
+    raise SystemExit(run_node(BrokenEnvironmentNode))

@@ -121,7 +121,7 @@ SUBPROCESS_CASES = {"--seed abc", "--trials 0", "--out file.txt", "--bag file.tx
 NODE_CASES = [  # (node, its arguments after --ros-args, what the one error line says)
     ("agent", ["-p", "omega:=-5"], "omega must be a positive integer below 2**31, got -5"),
     ("agent", ["-p", "sigmaa:=3"], "unknown parameter 'sigmaa'"),
-    ("reward", ["-p", "segments:=0"], "segments must be an integer from 1 to 256, got 0"),
+    ("agent", ["-p", "segments:=0"], "segments must be an integer from 1 to 256, got 0"),
     ("agent", ["-p", "sigma:=abc"], "sigma must be an integer, got 'abc'"),
     ("agent", ["-p", "sigma"], "Couldn't parse parameter override rule: '-p sigma'"),
     ("agent", ["-p", "seed:=1.5"], "seed must be an integer from 0 to 2**32-1, got 1.5"),
@@ -136,8 +136,11 @@ NODE_CASES = [  # (node, its arguments after --ros-args, what the one error line
     ("trial_manager", ["-p", "stall_timeout_s:=0"], "stall_timeout_s must be a finite number > 0"),
     ("trial_manager", ["--unknown-ros-flag"], "unknown ROS arguments ['--unknown-ros-flag']"),
     ("trial_manager", ["--log-level", "loud"], "Couldn't parse log level"),
-    ("gymnasium_env", ["-p", "tau:=0.01"], "tau must be gymnasium's 0.02 s"),
-    ("mujoco_env", ["-p", "tau:=0.01"], "tau must be MuJoCo's 0.02 s"),
+    ("environment", ["-p", "simulator:=gymnasium", "-p", "tau:=0.01"],
+     "tau must be gymnasium's 0.02 s"),
+    ("environment", ["-p", "simulator:=mujoco", "-p", "tau:=0.01"], "tau must be MuJoCo's 0.02 s"),
+    ("environment", ["-p", "simulator:=bullet"],
+     "simulator must be one of cartpole, gymnasium, mujoco, got 'bullet'"),
     # a params file outside the ROS arguments (here after their end, --): rclpy ignores it
     ("agent", ["--", "--params-file", "nan.yaml"], "unexpected arguments ['--params-file'"),
 ]

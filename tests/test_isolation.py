@@ -25,7 +25,7 @@ import pytest
 from clnn_ros import bag, names
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
-from clnn_ros.names import STATE
+from clnn_ros.graph.names import STATE
 from clnn_ros.lab.two_hosts import veth_link
 
 from test_graph import processes_with, read_steps, wait_for_line

@@ -14,7 +14,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 OFFLINE = ("clnn_ros.analyze", "clnn_ros.bag", "clnn_ros.echo", "clnn_ros.topics",
-           "clnn_ros.names", "clnn_ros.qos", "clnn_ros.message_fields")
+           "clnn_ros.graph.names", "clnn_ros.graph.qos", "clnn_ros.graph.fields")
 
 
 def test_the_core_imports_nothing_outside_it():
@@ -43,8 +43,7 @@ def test_offline_tools_load_neither_rclpy_nor_numba():
 def test_the_graphs_processes_load_no_numba():
     """Numba is the batch engine's alone: in each of a graph's processes it would be two thirds
     of the start-up (core.jitable)."""
-    modules = ["clnn_ros.run_all", "clnn_ros.nodes.gymnasium_env", "clnn_ros.nodes.mujoco_env",
-               "clnn_ros.nodes.recorder",
+    modules = ["clnn_ros.run_all", "clnn_ros.composed", "clnn_ros.nodes.recorder",
                *(f"clnn_ros.nodes.{name}" for name in ("environment", "encoder", "reward",
                                                        "agent", "trial_manager"))]
     check = f"import sys, {', '.join(modules)}; print('numba' in sys.modules)"

@@ -32,7 +32,7 @@ from clnn_ros_msgs.msg import (
     WeightSnapshot,
 )
 
-from clnn_ros import message_fields
+from clnn_ros.graph import fields as message_fields
 from clnn_ros.core.physics import CONTINUE, FAIL_ANGLE, FAIL_POSITION
 
 pytestmark = pytest.mark.ros  # every test here starts ROS / DDS

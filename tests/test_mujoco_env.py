@@ -90,7 +90,8 @@ def test_limits_are_checked_after_each_step_the_angle_first():
 def test_contract_checker_passes_the_mujoco_node(ros_env):
     result = subprocess.run(
         [PY, "-m", "clnn_ros.check_env_node", "--domain-id", DOMAIN_ID, "--namespace",
-         "/check_mujoco", PY, "-m", "clnn_ros.nodes.mujoco_env"],
+         "/check_mujoco", PY, "-m", "clnn_ros.nodes.environment", "--ros-args", "-p",
+         "simulator:=mujoco"],
         env=ros_env, capture_output=True, text=True, timeout=180)
     assert result.returncode == 0, result.stdout
     assert sum(line.startswith("PASS  ") for line in result.stdout.splitlines()) == len(RULES), \

@@ -14,11 +14,13 @@ import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
-from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters
+from rcl_interfaces.srv import (DescribeParameters, GetParameters, ListParameters,
+                                 SetParameters)
 
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
-from clnn_ros.nodes.common import resend_until_answered
+from clnn_ros.graph.run import NODE_PARAMETERS
+from clnn_ros.rclpy_session import resend_until_answered
 
 from test_graph import processes_with, read_steps, wait_for_line
 
@@ -82,7 +84,7 @@ def test_a_read_only_parameter_is_refused_with_a_reason(agent_by_hand):
 
 
 def test_parameters_describe_their_meaning_and_constraints(agent_by_hand):
-    names = ["sigma", "physics", "rho_plus", "seed", "stall_timeout_s"]
+    names = ["sigma", "tie_break", "rho_plus", "seed", "segments"]
     found = call(agent_by_hand, DescribeParameters, "/agent/describe_parameters",
                  DescribeParameters.Request(names=names)).descriptors
     described = dict(zip(names, found))
@@ -90,10 +92,34 @@ def test_parameters_describe_their_meaning_and_constraints(agent_by_hand):
     assert described["sigma"].description.startswith("success window")
     assert (described["sigma"].integer_range[0].from_value,
             described["sigma"].integer_range[0].to_value) == (1, 2**31 - 1)
-    assert described["physics"].additional_constraints == \
-        "one of: paper, correct, integration_slip"
+    assert described["tie_break"].additional_constraints == "one of: exact, index, random"
     assert described["rho_plus"].floating_point_range[0].from_value == 0.0
     assert described["seed"].integer_range[0].to_value == 2**32 - 1
+
+
+@pytest.mark.parametrize("node", ["encoder", "agent"])
+def test_a_node_declares_only_the_parameters_it_uses(ros_env, node):
+    """One params file serves the whole graph; each node declares what it uses (NODE_PARAMETERS)
+    and ignores the run's other values: `ros2 param list /encoder` shows no sigma."""
+    process = subprocess.Popen([sys.executable, "-m", f"clnn_ros.nodes.{node}", "--ros-args",
+                                "-r", f"__ns:=/only_{node}", "-p", "sigma:=128",
+                                "-p", "physics:=correct"], env=ros_env,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=int(DOMAIN_ID))
+    client = rclpy.create_node("parameter_lister", context=context)
+    try:
+        listed = call(client, ListParameters, f"/only_{node}/{node}/list_parameters",
+                      ListParameters.Request()).result.names
+    finally:
+        client.destroy_node()
+        context.try_shutdown()
+        process.send_signal(signal.SIGINT)
+        process.communicate(timeout=20)
+    builtin = {"use_sim_time", "start_type_description_service"}
+    assert set(listed) - builtin == set(NODE_PARAMETERS[node]) | ({"segments"} if node == "agent"
+                                                                  else set())
+    assert "physics" not in listed and ("sigma" in listed) == (node == "agent")
 
 
 def test_two_graphs_in_two_namespaces_on_one_domain(ros_env, tmp_path):

@@ -20,6 +20,8 @@ import yaml
 from catkin_pkg.package import parse_package
 
 from clnn_ros import launch_plan, run_all
+from clnn_ros.core.params import ParamError
+from clnn_ros.graph.run import node_arguments
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE_DIR = ROOT / "ros_package"
@@ -114,32 +116,39 @@ def test_the_launch_plan_is_run_alls_graph_with_its_parameters(tmp_path, monkeyp
 
 
 def test_launch_arguments_are_run_alls_options(tmp_path):
+    """The launch file and run_all make the same run of the same settings, each without the
+    other's command line (launch_plan does not go through run_all's argparse)."""
     out = tmp_path / "out"
     params_file = tmp_path / "p.yaml"
     params_file.write_text("/**:\n  ros__parameters:\n    sigma: 4\n")
     arguments = {"seed": "3", "trials": "7", "nsv": "2", "params_file": str(params_file),
                  "namespace": "robot1", "env": "gymnasium", "out": str(out), "record": "false"}
     nodes = launch_plan.plan(arguments, tmp_path)
-    assert [n.executable for n in nodes] == ["gymnasium_env", *run_all.NODES[1:]]
+    assert [n.executable for n in nodes] == list(run_all.NODES)
     expected = run_all.build_parameters(run_all.parse_args(
-        ["--seed", "3", "--trials", "7", "--nsv", "2", "--params-file", str(params_file)]))
+        ["--seed", "3", "--trials", "7", "--nsv", "2", "--params-file", str(params_file),
+         "--env", "gymnasium"]))
     assert params(nodes[0].params_file) == {**expected, "out_dir": str(out.resolve())}
-    assert expected["sigma"] == 4
+    assert expected["sigma"] == 4 and expected["simulator"] == "gymnasium"
     for node in nodes:  # the same command-line arguments as run_all gives its processes
         assert ["--ros-args", "--params-file", str(node.params_file), "--log-level",
                 node.log_level, "-r", f"__ns:={node.namespace}",
                 *[f for rule in node.remappings for f in ("-r", ":=".join(rule))]] == \
-            run_all.ros_arguments(node.params_file, node.namespace)
+            node_arguments(node.params_file, node.namespace)
     external = launch_plan.plan({"env": "external", "record": "false"}, tmp_path)
     assert [n.executable for n in external] == list(run_all.NODES[1:])
     assert params(external[0].params_file)["external_nodes"] == "environment"
 
 
-def test_bad_launch_arguments_end_with_run_alls_error_line(tmp_path, capsys):
-    with pytest.raises(SystemExit) as stopped:
-        launch_plan.plan({"nsv": "two"}, tmp_path)
-    assert stopped.value.code == 2
-    assert capsys.readouterr().err == "run_all: error: argument --nsv: invalid int value: 'two'\n"
+@pytest.mark.parametrize("arguments, line", [
+    ({"nsv": "two"}, "nsv must be an integer, got 'two'"),
+    ({"env": "bullet"}, "env must be one of cartpole, gymnasium, mujoco, external, got 'bullet'"),
+    ({"namespace": "1robot"}, "namespace '1robot': expected letters, digits and _"),
+])
+def test_bad_launch_arguments_are_one_line(tmp_path, arguments, line):
+    with pytest.raises(ParamError) as refused:
+        launch_plan.plan(arguments, tmp_path)
+    assert str(refused.value).startswith(line)
 
 
 def colcon() -> str | None:
@@ -168,9 +177,9 @@ def test_colcon_builds_the_package_into_an_install_tree(tmp_path):
                            timeout=600)
     assert built.returncode == 0, built.stdout + built.stderr
     install = workspace / "install" / "clnn_ros"
-    for name in ("environment", "gymnasium_env", "mujoco_env", "encoder", "reward", "agent",
-                 "trial_manager", "recorder", "run_all", "echo", "topics", "analyze", "reproduce",
-                 "check_env", "save_checkpoint"):
+    for name in ("environment", "encoder", "reward", "agent", "trial_manager", "recorder",
+                 "run_all", "echo", "topics", "analyze", "reproduce", "check_env",
+                 "save_checkpoint"):
         assert (install / "lib" / "clnn_ros" / name).is_file(), name
     assert (install / "share" / "clnn_ros" / "package.xml").read_text() == \
         (PACKAGE_DIR / "package.xml").read_text()

@@ -110,16 +110,19 @@ def load_checkpoint(path: str | os.PathLike) -> Checkpoint:
     return Checkpoint(params, agent=agent.state(), **scalars)
 
 
-def check_resumable(checkpoint: Checkpoint, params: Params, seed: int) -> None:
+def check_resumable(checkpoint: Checkpoint, params: Params, seed: int,
+                    compared: tuple[str, ...] | None = None) -> None:
     """A resume continues the same episode: same seed and parameters (only the number of trials
-    may change) and at least one trial left. CheckpointError with one line otherwise."""
+    may change; `compared`: only these are looked at, None: all) and at least one trial left.
+    CheckpointError with one line otherwise."""
     if seed != checkpoint.seed:
         raise CheckpointError(f"the checkpoint continues seed {checkpoint.seed}, this run has "
                               f"seed {seed}")
     # segments None stands for the paper's count for nsv: the count the network has is compared
     saved = {**checkpoint.params.to_dict(), "segments": checkpoint.params.n_segments}
     wanted = {**params.to_dict(), "segments": params.n_segments}
-    differ = [k for k in saved if k != "trials" and saved[k] != wanted[k]]
+    differ = [k for k in saved if k != "trials" and saved[k] != wanted[k] and
+              (compared is None or k in compared)]
     if differ:
         raise CheckpointError("the checkpoint was saved with " + ", ".join(
             f"{k}={saved[k]!r} (this run: {wanted[k]!r})" for k in differ)

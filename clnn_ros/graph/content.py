@@ -1,20 +1,21 @@
-"""The content rules of the graph's input topics: what every subscriber of a topic refuses,
-whoever sent it and whatever the node's state. Each rule returns the reason to refuse a message,
-or None. GraphNode.subscribe applies the topic's rule (common.CONTENT_RULES) to every message
-first; then come the sender and the tick (docs/ROS_GRAPH.md, "What a node refuses")."""
+"""The content rules of the graph's topics: what every subscriber of a topic refuses, whoever
+sent it and whatever the node's state. Each rule returns the reason to refuse a message, or None.
+A node applies its topic's rule (RULES) to every message first; then come the sender and the
+tick (docs/ROS_GRAPH.md, "What a node refuses"). A rule reads only the parameters its topic's
+subscribers take (graph.run.NODE_PARAMETERS)."""
 
 from __future__ import annotations
 
 import math
 
-from clnn_ros_msgs.msg import CartPoleState, TrialEvent
-
 from ..core.params import Params
 from ..core.rln import ONE_HOT, REWARD_KINDS
+from .fields import EPISODE_END, END, FAILURE_REASONS as REASONS, START
+from .names import ACTION, CLOCK, REWARD, SPIKES, STATE, TRIAL_EVENT, WEIGHTS
 
 N_NEURONS = 2  # the agent's two RLNs: negative and positive force
-EVENT_KINDS = (TrialEvent.START, TrialEvent.END, TrialEvent.EPISODE_END)
-FAILURE_REASONS = (CartPoleState.FAILURE_POLE_ANGLE, CartPoleState.FAILURE_CART_POSITION)
+EVENT_KINDS = (START, END, EPISODE_END)
+FAILURE_REASONS = REASONS[1:]  # a failed state's failure_reason
 # A simulator's limit check may differ from the message's degrees in the last bits (gymnasium
 # works in radians): a state that did not fail may lie this far beyond a limit.
 LIMIT_TOLERANCE = 1e-6
@@ -32,7 +33,7 @@ def clock_problem(msg, p: Params) -> str | None:
 def event_problem(msg, p: Params) -> str | None:
     if msg.event not in EVENT_KINDS:
         return f"unknown event kind {msg.event}"
-    if msg.event == TrialEvent.START and not abs(msg.initial_angle_deg) < p.angle_limit_deg:
+    if msg.event == START and not abs(msg.initial_angle_deg) < p.angle_limit_deg:
         return f"START's initial angle {msg.initial_angle_deg} is not inside " \
                f"+-{p.angle_limit_deg} deg"
     return None
@@ -75,6 +76,14 @@ def action_problem(msg, p: Params) -> str | None:
         return f"force_direction {msg.force_direction} is not -1, 0 or 1"
     if msg.force_n != msg.force_direction * p.force:
         return f"force_n {msg.force_n} is not force_direction x force ({p.force:g} N)"
+    return None
+
+
+def network_action_problem(msg, p: Params) -> str | None:
+    """The action's winner, for a subscriber that knows the network (the environment does not
+    need to)."""
+    if problem := action_problem(msg, p):
+        return problem
     if msg.winning_neuron >= N_NEURONS or msg.winning_segment >= p.n_segments:
         return f"winning neuron {msg.winning_neuron} / segment {msg.winning_segment} does not " \
                f"exist ({N_NEURONS} neurons x {p.n_segments} segments)"
@@ -89,3 +98,9 @@ def weights_problem(msg, p: Params) -> str | None:
     if not all(0.0 <= w <= p.w_max for w in msg.weights):  # False for NaN too
         return f"weights outside [0, w_max={p.w_max:g}]"
     return None
+
+
+# Each topic's rule; the trial manager, which knows the network, checks actions' winners too.
+RULES = {CLOCK: clock_problem, TRIAL_EVENT: event_problem, STATE: state_problem,
+         SPIKES: spikes_problem, REWARD: reward_problem, ACTION: action_problem,
+         WEIGHTS: weights_problem}

@@ -2,6 +2,9 @@
 offline tools read them without loading rclpy; the .msg files in msgs_spec/ define the same
 values, and tests/test_msgs.py checks that they agree."""
 
+import csv
+import io
+
 # TrialEvent.event
 START, END, EPISODE_END = 0, 1, 2
 # CartPoleState.failure_reason, by the physics status of core.physics (CONTINUE, FAIL_ANGLE,
@@ -13,3 +16,29 @@ REACHED_MAX_STEPS = "max_steps"
 END_REASONS = (REACHED_MAX_STEPS, *FAILURE_REASONS[1:])
 # trials.csv, as the trial manager and analyze write it.
 TRIALS_CSV_HEADER = ("seed", "trial", "initial_angle_deg", "steps", "end_reason")
+
+NANOSECONDS = 1_000_000_000
+
+
+def tick_nanoseconds(tau_s: float) -> int:
+    """One tick of sim time in nanoseconds: every stamp of the graph is a whole multiple."""
+    return round(tau_s * 1e9)
+
+
+def tick_stamp(tick: int, tau_ns: int) -> tuple[int, int]:
+    """(sec, nanosec) of the sim time of `tick`: the header stamp and /clock of that tick."""
+    return divmod(tick * tau_ns, NANOSECONDS)
+
+
+def stamp_nanoseconds(sec: int, nanosec: int) -> int:
+    return sec * NANOSECONDS + nanosec
+
+
+def trials_csv(rows) -> str:
+    """trials.csv's text: TRIALS_CSV_HEADER, then the rows (seed, trial, initial angle, steps,
+    end reason), as the trial manager and analyze write it."""
+    text = io.StringIO()
+    writer = csv.writer(text)
+    writer.writerow(TRIALS_CSV_HEADER)
+    writer.writerows(rows)
+    return text.getvalue()

@@ -1,21 +1,9 @@
-"""Names of the graph: its nodes, topics and run settings. No ROS import, so offline tools (bag, analyze) read
-them without loading rclpy.
+"""The graph's names: nodes, topics, who publishes what, and the namespace rule. Topic names are
+relative: a node resolves them in its namespace, so `-r __ns:=/robot1` (or run_all --namespace
+robot1) moves the whole graph to /robot1/... Names whose first token starts with `_` are
+plumbing, hidden by ROS's convention (`ros2 topic list` shows them only with
+--include-hidden-topics)."""
 
-Topic names are relative: a node resolves them in its namespace, so `-r __ns:=/robot1` (or
-run_all --namespace robot1) moves the whole graph to /robot1/... Names whose first token starts
-with `_` are plumbing, hidden by ROS's convention (`ros2 topic list` shows them only with
---include-hidden-topics).
-
-Lockstep protocol (one tick = one physics step tau of sim time; every message carries the tick):
-
-    trial_manager --clock(t) [+ trial/event START(t)]--> environment
-    environment   --cartpole/state(t)--> encoder, reward, trial_manager
-                  [--cartpole/markers(t)--> a 3D view (Foxglove, RViz), the recorder, at ticks
-                   that are multiples of marker_period_ticks: no node of the graph reads it]
-    encoder       --rln/spikes(t)--> agent            reward --rln/reward(t)--> agent
-    agent         --rln/action(t)--> environment (applied at tick t+1), trial_manager
-    trial_manager, holding state(t) and action(t), publishes clock(t+1)
-"""
 
 CLOCK = "clock"
 TRIAL_EVENT = "trial/event"
@@ -50,11 +38,6 @@ SAVE_CHECKPOINT = "~/save_checkpoint"
 GRAPH_NODES = ("environment", "encoder", "reward", "agent")
 TRIAL_MANAGER = "trial_manager"
 RECORDER = "recorder"
-# Settings of a run that are not model parameters (every node takes them), with their defaults
-# (clnn_ros.nodes.parameters describes them).
-RUN_SETTINGS = {"seed": 0, "stall_timeout_s": 5.0, "out_dir": "", "progress": True,
-                "extra_nodes": "", "external_nodes": "", "init_weights": "",
-                "marker_period_ticks": 5}
 # The trial manager's exit status when the graph never started: another graph of the same names
 # runs in the namespace (0 done, 1 failed, 2 bad input, 128 + N signal N).
 NOT_STARTED = 3
@@ -72,3 +55,19 @@ def graph_topic(resolved: str) -> str:
     """The graph's relative name of a resolved topic name in any namespace ("/robot1/clock" ->
     "clock"); another topic's name unchanged."""
     return next((name for name in TOPIC_TYPES if resolved.endswith("/" + name)), resolved)
+
+
+def namespace_problem(name: str) -> str | None:
+    """Why `name` is not a ROS namespace (tokens of letters, digits and _, not starting with a
+    digit, separated by /), or None."""
+    tokens = name.strip("/").split("/")
+    if not name.strip("/") or not all(t and (t[0].isalpha() or t[0] == "_") and
+                                      all(c.isalnum() or c == "_" for c in t) and t.isascii()
+                                      for t in tokens):
+        return "expected letters, digits and _ (not starting with a digit), '/' between levels"
+    return None
+
+
+def clock_remappings(namespace: str) -> list[tuple[str, str]]:
+    """The sim clock moved into the namespace (use_sim_time subscribes to the absolute /clock)."""
+    return [("/clock", f"{namespace}/clock")] if namespace != "/" else []

@@ -1,6 +1,6 @@
 """The QoS of the graph's topics, as plain descriptions: no ROS import, so offline tools and
 benchmarks read them without rclpy. A node builds its rclpy QoSProfile from one
-(clnn_ros.nodes.common.qos_profile). The policy names are those of rclpy's enums in lower case,
+(clnn_ros.rclpy_session.qos_profile). The policy names are those of rclpy's enums in lower case,
 as rosbag2 writes them.
 """
 
@@ -21,7 +21,7 @@ class Qos:
 # most END, EPISODE_END and START on trial/event within one tick). A subscriber outside the
 # lockstep (echo, the recorder) may lag: the publisher's history keeps the last 2000 messages
 # for it (about 1 s of the graph); the recorder also holds the graph back
-# (nodes.common.RECORDER_WINDOW).
+# (RECORDER_WINDOW).
 LOCKSTEP = Qos(depth=2000)
 # The recorder's progress: only its latest tick matters.
 PROGRESS = Qos(depth=1)
@@ -33,3 +33,10 @@ READY = Qos(depth=16, durability="transient_local")
 RECORD = Qos(depth=100_000)
 # echo's subscription: it may print slower than the graph runs.
 ECHO = Qos(depth=1000)
+# The recorder's progress (the last tick it holds on every per-tick topic): the trial manager
+# keeps the graph at most RECORDER_WINDOW ticks ahead of it, far less than the publishers'
+# history, so a slow recorder slows the graph down instead of losing messages.
+RECORDER_WINDOW = 500
+# Seen once in a suite beside CPU hogs: the trial manager never took the recorder's one
+# announcement (TRANSIENT_LOCAL, reliable; a reader that joined later got it) and waited for it.
+READY_REPEAT_S = 1.0

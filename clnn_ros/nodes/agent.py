@@ -5,6 +5,9 @@ the state the episode resumes from) and publishes its weights. The service
 <out_dir>/checkpoint_<tick>.npz and answers with the path.
 
     python -m clnn_ros.nodes.agent --ros-args -p seed:=1 -p nsv:=1
+
+Subscribes rln/spikes(t) and rln/reward(t); publishes rln/action(t), and rln/weights after each
+trial. Ends on trial/event EPISODE_END.
 """
 
 from __future__ import annotations
@@ -12,7 +15,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from clnn_ros_msgs.msg import Action, Reward, SpikeVector, WeightSnapshot
+from clnn_ros_msgs.msg import Action, Reward, SpikeVector, TrialEvent, WeightSnapshot
+from rclpy.node import Node
+from rclpy.task import Future
 from std_srvs.srv import Trigger
 
 from ..core.checkpoint import capture, save_checkpoint
@@ -20,29 +25,48 @@ from ..core.episode import start_episode
 from ..core.rln import REWARD_KINDS
 from ..files import describe_write_error
 from ..init_weights import episode_start
-from ..names import ACTION, REWARD, SAVE_CHECKPOINT, SPIKES, WEIGHTS
-from .common import GraphNode, TickJoin, node_main
+from ..graph.fields import tick_nanoseconds
+from ..graph.lockstep import Refusals, TickJoin
+from ..graph.names import ACTION, REWARD, SAVE_CHECKPOINT, SPIKES, TRIAL_EVENT, WEIGHTS
+from ..graph.run import NODE_PARAMETERS
+from .glue import (LOCKSTEP_QOS, Readiness, checked, declare_run_parameters,
+                   endpoints_matched, ends_with_the_episode, run_node, stamp, use_sim_time)
 
 
-
-class AgentNode(GraphNode):
-    def __init__(self, **options):
-        # action subscribers: environment, trial manager; weights: trial manager
-        super().__init__("agent", {"action_pub": (Action, ACTION, 2),
-                                   "weights_pub": (WeightSnapshot, WEIGHTS, 1)}, **options)
+class AgentNode(Node):
+    def __init__(self, run: dict, **node_options):
+        super().__init__("agent", **node_options)
+        self.params, self.settings = declare_run_parameters(self, run)
+        use_sim_time(self)
+        self.tau_ns = tick_nanoseconds(self.params.tau)
         # the seed's weights, or those of init_weights (a checkpoint: its whole state)
-        start = episode_start(self.settings["init_weights"], self.settings["seed"], self.params)
+        start = episode_start(self.settings["init_weights"], self.settings["seed"], self.params,
+                              NODE_PARAMETERS["agent"])
         self.agent, self.counter, self.next_trial = start_episode(
             self.settings["seed"], self.params, start.weights, start.resume)
         self.trial = -1
         self.trial_start_tick = self.last_tick = None
         self.trial_step = 0  # ticks of trial next_trial done: 0 between two trials
-        self.create_service(Trigger, SAVE_CHECKPOINT, self.on_save_checkpoint)
+        self.finished, self.failure = Future(), None
+        self.refusals = Refusals(self.get_logger().error)
+        self.join = TickJoin((SPIKES, REWARD), self.on_tick, self.refusals)
         self.action_msg = Action()  # one message object, refilled each tick
-        self.join = TickJoin(self, (SPIKES, REWARD), self.on_tick)
-        # content rules (1-hot spikes, consistent reward code): GraphNode.subscribe
-        self.subscribe(SpikeVector, SPIKES, lambda msg: self.join.offer(SPIKES, msg))
-        self.subscribe(Reward, REWARD, lambda msg: self.join.offer(REWARD, msg))
+        self.action_pub = self.create_publisher(Action, ACTION, LOCKSTEP_QOS)
+        self.weights_pub = self.create_publisher(WeightSnapshot, WEIGHTS, LOCKSTEP_QOS)
+        inputs = [self.create_subscription(
+            msg_type, topic,
+            checked(topic, self.params, self.refusals,
+                    lambda msg, topic=topic: self.join.offer(topic, msg)), LOCKSTEP_QOS)
+            for msg_type, topic in ((SpikeVector, SPIKES), (Reward, REWARD))]
+        self.create_subscription(TrialEvent, TRIAL_EVENT, checked(
+            TRIAL_EVENT, self.params, self.refusals,
+            ends_with_the_episode(self.finished, self.refusals, lambda: self.join.tick)),
+            LOCKSTEP_QOS)
+        self.create_service(Trigger, SAVE_CHECKPOINT, self.on_save_checkpoint)
+        # actions go to the environment and the trial manager, weights to the trial manager
+        self.readiness = Readiness(self, endpoints_matched(
+            self.settings["extra_nodes"], [(self.action_pub, 2), (self.weights_pub, 1)], inputs),
+            is_running=lambda: self.join.tick > 0)
 
     def on_tick(self, inbox: dict) -> None:
         spikes, reward = inbox[SPIKES], inbox[REWARD]
@@ -64,17 +88,19 @@ class AgentNode(GraphNode):
             action.force_direction = 1 if neuron else -1
             action.force_n = self.params.force if neuron else -self.params.force
             action.winning_neuron, action.winning_segment = neuron, segment
-        self.action_pub.publish(self.stamp(action, reward.tick, reward.trial))
+        self.action_pub.publish(stamp(action, reward.tick, reward.trial, self.tau_ns))
         if reward.trial_over:
             try:
                 self.save("checkpoint.npz")  # before the weights: on disk when the episode ends
-            except OSError as error:
-                self.fail(describe_write_error(error))
+            except OSError as error:  # the run ends with one line naming the cause
+                self.failure = describe_write_error(error)
+                self.get_logger().error(self.failure)
+                self.finished.set_result(1)
                 return
             w = self.agent.weights
-            self.weights_pub.publish(self.stamp(WeightSnapshot(
+            self.weights_pub.publish(stamp(WeightSnapshot(
                 neurons=w.shape[0], segments=w.shape[1], inputs=w.shape[2],
-                weights=w.ravel().tolist()), reward.tick, reward.trial))
+                weights=w.ravel().tolist()), reward.tick, reward.trial, self.tau_ns))
 
     def save(self, name: str) -> Path | None:
         """Save the state after the last completed tick to <out_dir>/name; None without an
@@ -103,7 +129,7 @@ class AgentNode(GraphNode):
 
 
 def main() -> None:
-    raise SystemExit(node_main(AgentNode))
+    raise SystemExit(run_node(AgentNode))
 
 
 if __name__ == "__main__":

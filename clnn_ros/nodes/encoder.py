@@ -1,27 +1,50 @@
-"""Encoder node: cart-pole state -> spike vector (Table 1, 1 or 2 state variables).
+"""Encoder node: cart-pole state -> spike vector (Table 1, 1 to 4 state variables).
 
     python -m clnn_ros.nodes.encoder --ros-args -p nsv:=2 -p velocity_edge:=0.5
+
+Subscribes cartpole/state(t); publishes rln/spikes(t), the 1-hot code of each encoded state
+variable. Ends on trial/event EPISODE_END.
 """
 
 from __future__ import annotations
 
-from clnn_ros_msgs.msg import CartPoleState, SpikeVector
+from clnn_ros_msgs.msg import CartPoleState, SpikeVector, TrialEvent
+from rclpy.node import Node
+from rclpy.task import Future
 
 from ..core.encoder import Encoder
-from ..names import SPIKES, STATE
-from .common import GraphNode, TickJoin, node_main
+from ..graph.fields import tick_nanoseconds
+from ..graph.lockstep import Refusals, TickJoin
+from ..graph.names import SPIKES, STATE, TRIAL_EVENT
+from .glue import (LOCKSTEP_QOS, Readiness, checked, declare_run_parameters,
+                   endpoints_matched, ends_with_the_episode, run_node, stamp, use_sim_time)
 
 
-class EncoderNode(GraphNode):
-    def __init__(self, **options):
-        # spike subscribers: agent, trial manager
-        super().__init__("encoder", {"spikes_pub": (SpikeVector, SPIKES, 2)}, **options)
+class EncoderNode(Node):
+    def __init__(self, run: dict, **node_options):
+        super().__init__("encoder", **node_options)
+        self.params, settings = declare_run_parameters(self, run)
+        use_sim_time(self)
+        self.tau_ns = tick_nanoseconds(self.params.tau)
         self.encoder = Encoder.from_params(self.params)
+        self.finished, self.failure = Future(), None
+        self.refusals = Refusals(self.get_logger().error)
+        self.join = TickJoin((STATE,), self.on_tick, self.refusals)
         # One message object, refilled each tick (publish serializes it at once); labels fixed.
         self.spikes_msg = SpikeVector(input_labels=self.encoder.labels())
-        self.join = TickJoin(self, (STATE,), self.on_tick)
-        # content rules (finite, consistent, in range): GraphNode.subscribe
-        self.subscribe(CartPoleState, STATE, lambda msg: self.join.offer(STATE, msg))
+        self.spikes_pub = self.create_publisher(SpikeVector, SPIKES, LOCKSTEP_QOS)
+        state_sub = self.create_subscription(
+            CartPoleState, STATE,
+            checked(STATE, self.params, self.refusals, lambda msg: self.join.offer(STATE, msg)),
+            LOCKSTEP_QOS)
+        self.create_subscription(TrialEvent, TRIAL_EVENT, checked(
+            TRIAL_EVENT, self.params, self.refusals,
+            ends_with_the_episode(self.finished, self.refusals, lambda: self.join.tick)),
+            LOCKSTEP_QOS)
+        # spikes go to the agent and the trial manager
+        self.readiness = Readiness(self, endpoints_matched(
+            settings["extra_nodes"], [(self.spikes_pub, 2)], [state_sub]),
+            is_running=lambda: self.join.tick > 0)
 
     def on_tick(self, inbox: dict) -> None:
         msg = inbox[STATE]
@@ -29,10 +52,11 @@ class EncoderNode(GraphNode):
                                       msg.pole_angle_deg, msg.pole_angular_velocity_deg_per_s))
         out = self.spikes_msg
         out.spikes, out.spiking_inputs = spikes.tolist(), spikes.nonzero()[0].tolist()
-        self.spikes_pub.publish(self.stamp(out, msg.tick, msg.trial))
+        self.spikes_pub.publish(stamp(out, msg.tick, msg.trial, self.tau_ns))
+
 
 def main() -> None:
-    raise SystemExit(node_main(EncoderNode))
+    raise SystemExit(run_node(EncoderNode))
 
 
 if __name__ == "__main__":

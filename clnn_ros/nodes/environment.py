@@ -1,6 +1,14 @@
-"""Environment node: owns the cart-pole (core physics), applies actions, publishes the state.
+"""Environment node: owns the cart-pole, applies actions, publishes the state.
 
     python -m clnn_ros.nodes.environment --ros-args -p physics:=paper
+    python -m clnn_ros.nodes.environment --ros-args -p simulator:=gymnasium
+
+The cart-pole (setting `simulator`) is the core's physics as the model parameters say
+(`cartpole`), gymnasium's CartPole-v1 (`gymnasium`: gymnasium.make("CartPole-v1").unwrapped,
+its state set directly at START, stepped with action 0 or 1) or an MJCF plant simulated by
+MuJoCo (`mujoco`: clnn_ros.core.mujoco_physics). The last two keep their own masses, length,
+force, limits and tau (0.02 s: the run's tau must be theirs); their radians become the
+message's degrees.
 
 Tick t: on /clock(t) together with either /trial/event START(t) (reset the pole to the trial's
 initial angle) or /rln/action(t-1) (apply the force, one physics step), publish
@@ -13,26 +21,50 @@ optional there).
 from __future__ import annotations
 
 from clnn_ros_msgs.msg import Action, CartPoleState, TrialEvent
+from rclpy.node import Node
+from rclpy.task import Future
 from rosgraph_msgs.msg import Clock
 from visualization_msgs.msg import MarkerArray
 
-from ..core.params import ParamError
+from ..core.params import ParamError, Params
 from ..core.physics import CONTINUE, CartPole
-from ..message_fields import FAILURE_REASONS
-from ..names import ACTION, CLOCK, MARKERS, STATE, TRIAL_EVENT
-from .common import GraphNode, node_main
+from ..graph.fields import FAILURE_REASONS, stamp_nanoseconds, tick_nanoseconds
+from ..graph.lockstep import Refusals
+from ..graph.names import ACTION, CLOCK, MARKERS, STATE, TRIAL_EVENT
+from .glue import (LOCKSTEP_QOS, Readiness, checked, declare_run_parameters,
+                   endpoints_matched, ends_with_the_episode, run_node, stamp, use_sim_time)
 from .markers import FRAME, CartPoleMarkers
 
 
-class EnvironmentNode(GraphNode):
-    def __init__(self, **options):
-        # state subscribers: encoder, reward, trial manager
-        super().__init__("environment", {"state_pub": (CartPoleState, STATE, 3)}, **options)
-        self.marker_period = self.settings["marker_period_ticks"]
-        if self.marker_period:  # no subscriber in the graph; extra_nodes' (the recorder) waited for
-            self.add_publisher("markers_pub", MarkerArray, MARKERS, 0)
-        self.cartpole = CartPole(self.params)
-        self.markers = CartPoleMarkers(self.params.pole_length, self.params.track_limit_m)
+def simulator(name: str, params: Params):
+    """(the cart-pole, its pole's half-length and track limit in m, for the markers). Those
+    that step their own tau import their engine only when chosen."""
+    if name == "gymnasium":
+        from ..core.gym_physics import GymCartPole
+        cartpole, engine = GymCartPole(), "gymnasium"
+        limits = cartpole.env.length, cartpole.env.x_threshold
+    elif name == "mujoco":
+        from ..core.mujoco_physics import MujocoCartPole
+        cartpole, engine = MujocoCartPole(), "MuJoCo"
+        limits = cartpole.pole_length, cartpole.track_limit_m
+    else:
+        return CartPole(params), params.pole_length, params.track_limit_m
+    if abs(cartpole.tau - params.tau) > 1e-12:
+        raise ParamError(f"tau must be {engine}'s {cartpole.tau} s (one tick = one {engine} "
+                         f"step), got {params.tau}")
+    return (cartpole, *limits)
+
+
+class EnvironmentNode(Node):
+    def __init__(self, run: dict, **node_options):
+        super().__init__("environment", **node_options)
+        self.params, settings = declare_run_parameters(self, run)
+        use_sim_time(self)
+        self.tau_ns = tick_nanoseconds(self.params.tau)
+        self.cartpole, pole_half_length_m, track_limit_m = simulator(settings["simulator"],
+                                                                     self.params)
+        self.markers = CartPoleMarkers(pole_half_length_m, track_limit_m)
+        self.marker_period = settings["marker_period_ticks"]
         self.tick = 0
         self.trial = -1
         self.successful_steps = 0
@@ -41,62 +73,67 @@ class EnvironmentNode(GraphNode):
         self.pending = {}  # this tick's inputs by topic: /clock, and START or the action
         self.state_msg = CartPoleState()
         self.state_msg.header.frame_id = FRAME  # the frame cart_position_m is measured in
-        self.subscribe(Clock, CLOCK, self.on_clock)
-        self.subscribe(Action, ACTION, self.on_action)
-
-    def use_simulator(self, cartpole, name: str, pole_half_length_m: float,
-                      track_limit_m: float) -> None:
-        """Swap the paper's cart-pole for another simulator with the same interface that steps
-        its own fixed tau (gymnasium's, MuJoCo's): one tick is one of its steps, so the run's
-        tau must be the simulator's. The markers draw its pole and track."""
-        if abs(cartpole.tau - self.params.tau) > 1e-12:
-            raise ParamError(f"tau must be {name}'s {cartpole.tau} s (one tick = one {name} "
-                             f"step), got {self.params.tau}")
-        self.cartpole = cartpole
-        self.markers = CartPoleMarkers(pole_half_length_m, track_limit_m)
+        self.finished, self.failure = Future(), None
+        self.refusals = Refusals(self.get_logger().error)
+        self.state_pub = self.create_publisher(CartPoleState, STATE, LOCKSTEP_QOS)
+        # the markers have no subscriber in the graph; extra_nodes' (the recorder) are waited for
+        self.markers_pub = self.create_publisher(MarkerArray, MARKERS, LOCKSTEP_QOS) \
+            if self.marker_period else None
+        inputs = [self.create_subscription(msg_type, topic, checked(topic, self.params,
+                                                                    self.refusals, callback),
+                                           LOCKSTEP_QOS)
+                  for msg_type, topic, callback in ((Clock, CLOCK, self.on_clock),
+                                                    (Action, ACTION, self.on_action))]
+        self.ends_with_the_episode = ends_with_the_episode(self.finished, self.refusals,
+                                                           lambda: self.tick)
+        self.create_subscription(TrialEvent, TRIAL_EVENT, checked(
+            TRIAL_EVENT, self.params, self.refusals, self.on_trial_event), LOCKSTEP_QOS)
+        # states go to the encoder, the reward node and the trial manager
+        outputs = [(self.state_pub, 3)] + ([(self.markers_pub, 0)] if self.markers_pub else [])
+        self.readiness = Readiness(self, endpoints_matched(settings["extra_nodes"], outputs,
+                                                           inputs),
+                                   is_running=lambda: self.tick > 0)
 
     def on_clock(self, clock: Clock) -> None:
-        # a whole tick (content rules: GraphNode.subscribe)
-        tick = (clock.clock.sec * 1_000_000_000 + clock.clock.nanosec) // self.tau_ns
+        # a whole tick (its content rule)
+        tick = stamp_nanoseconds(clock.clock.sec, clock.clock.nanosec) // self.tau_ns
         if tick != self.tick:
-            self.refuse(CLOCK, clock, f"sim time {clock.clock.sec}.{clock.clock.nanosec:09d} s is "
-                                      f"not tick {self.tick}")
+            self.refusals.refuse(CLOCK, clock, f"sim time {clock.clock.sec}."
+                                               f"{clock.clock.nanosec:09d} s is not tick "
+                                               f"{self.tick}")
             return
         self._offer(CLOCK, clock)
 
-    def current_tick(self) -> int:
-        return self.tick
-
     def on_trial_event(self, event: TrialEvent) -> None:
-        super().on_trial_event(event)
+        self.ends_with_the_episode(event)
         if event.event != TrialEvent.START:
             return
         if event.tick != self.tick or not self.trial_over:
-            self.refuse(TRIAL_EVENT, event, f"START expected only at the tick after a trial "
-                                            f"ends (tick {self.tick})")
-        else:  # the angle is inside the limit (content rules: GraphNode.subscribe)
+            self.refusals.refuse(TRIAL_EVENT, event, f"START expected only at the tick after a "
+                                                     f"trial ends (tick {self.tick})")
+        else:  # the angle is inside the limit (its content rule)
             self._offer(TRIAL_EVENT, event)
 
     def on_action(self, action: Action) -> None:
-        # force_direction is -1, 0 or +1 (content rules: GraphNode.subscribe)
+        # force_direction is -1, 0 or +1 (its content rule)
         if action.force_direction == 0:
             # The agent's answer to a trial's last state. It travels on its own topic, so it may
             # arrive after the next trial's START and clock: match it by its tick alone.
             if action.tick != self.over_tick:
-                self.refuse(ACTION, action, "force_direction 0 answers only the last state of a "
-                                            "trial")
+                self.refusals.refuse(ACTION, action, "force_direction 0 answers only the last "
+                                                     "state of a trial")
             else:
                 self.over_tick = None
         elif self.trial_over:
-            self.refuse(ACTION, action, "the trial is over: no force applies")
+            self.refusals.refuse(ACTION, action, "the trial is over: no force applies")
         elif action.tick + 1 != self.tick:
-            self.refuse(ACTION, action, f"expected the action of tick {self.tick - 1}")
+            self.refusals.refuse(ACTION, action, f"expected the action of tick {self.tick - 1}")
         else:
             self._offer(ACTION, action)
 
     def _offer(self, topic: str, msg) -> None:
         if topic in self.pending:
-            self.refuse(topic, msg, f"a second message for tick {self.tick}")
+            self.refusals.refuse(topic, msg, f"a second message for tick {self.tick}")
             return
         self.pending[topic] = msg
         if CLOCK in self.pending and (TRIAL_EVENT in self.pending or ACTION in self.pending):
@@ -120,15 +157,15 @@ class EnvironmentNode(GraphNode):
          state.pole_angular_velocity_deg_per_s) = self.cartpole.state
         state.failed, state.failure_reason = status != CONTINUE, FAILURE_REASONS[status]
         state.successful_steps = self.successful_steps
-        self.state_pub.publish(self.stamp(state, self.tick, self.trial))
-        if self.marker_period and self.tick % self.marker_period == 0:
+        self.state_pub.publish(stamp(state, self.tick, self.trial, self.tau_ns))
+        if self.markers_pub and self.tick % self.marker_period == 0:
             self.markers_pub.publish(self.markers.update(
                 state.header.stamp, state.cart_position_m, state.pole_angle_deg))
         self.tick += 1
 
 
 def main() -> None:
-    raise SystemExit(node_main(EnvironmentNode))
+    raise SystemExit(run_node(EnvironmentNode))
 
 
 if __name__ == "__main__":

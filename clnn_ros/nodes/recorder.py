@@ -30,23 +30,21 @@ import sys
 import time
 from pathlib import Path
 
-from .. import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
-
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
 from rclpy.task import Future
 from std_msgs.msg import UInt64
 
 from clnn_ros_msgs.msg import TrialEvent
 
-from .. import bag, qos
+from .. import bag
 from ..core.params import ParamError, Params
 from ..files import describe_write_error
-from ..names import CLOCK, OPTIONAL, PER_TICK, RECORDED, RECORDER, TOPIC_TYPES, TRIAL_EVENT
-from .common import (PROGRESS_QOS, ReadyAnnouncer, WithMessageInfo, qos_profile, ros_session,
-                     spin_until_finished, steady_clock)
-from .parameters import declare_parameters
+from ..graph import qos
+from ..graph.names import CLOCK, OPTIONAL, PER_TICK, RECORDED, RECORDER, TOPIC_TYPES, TRIAL_EVENT
+from ..graph.fields import tick_nanoseconds
+from ..rclpy_session import WithMessageInfo, qos_profile, ros_session, spin_until_finished
+from .glue import PROGRESS_QOS, Readiness, declare_run_parameters, given_parameters, steady_clock
 
 RECORD_QOS = qos_profile(qos.RECORD)
 LINGER_S = 0.3      # after EPISODE_END: wait for messages still in flight on other topics
@@ -54,14 +52,10 @@ LINGER_MAX_S = 2.0
 
 
 class RecorderNode(Node):
-    def __init__(self, overrides: dict | None = None, context=None, namespace=None,
-                 cli_args=None):
-        super().__init__(RECORDER, context=context, namespace=namespace, cli_args=cli_args,
-                         automatically_declare_parameters_from_overrides=True,
-                         parameter_overrides=[Parameter(k, value=v)
-                                              for k, v in (overrides or {}).items()])
-        params, settings = declare_parameters(
-            self, own={"bag_path": ("", "the bag directory the recorder writes"),
+    def __init__(self, run: dict, **node_options):
+        super().__init__(RECORDER, **node_options)
+        params, settings = declare_run_parameters(
+            self, run, own={"bag_path": ("", "the bag directory the recorder writes"),
                        "environment": ("", "what ran as the environment node, kept in the bag "
                                        "(run_all sets it): cartpole, gymnasium, mujoco, external "
                                        "or the --env-node command")})
@@ -84,7 +78,7 @@ class RecorderNode(Node):
         self.last_tick = {}    # per-tick topic -> sim time of its last message
         self.missing = 0       # messages of per-tick topics that never arrived (gaps)
         self.subscriptions_by_topic = {}
-        self.tau_ns = round(params.tau * 1e9)
+        self.tau_ns = tick_nanoseconds(params.tau)
         for topic, type_name in TOPIC_TYPES.items():
             self.subscriptions_by_topic[topic] = self.create_subscription(
                 bag.message_class(type_name), topic, self._receiver(topic), RECORD_QOS, raw=True)
@@ -92,8 +86,7 @@ class RecorderNode(Node):
         self.episode_end_at = None
         self.last_message_at = time.monotonic()
         # the graph runs once a clock was recorded: no more announcements
-        self._ready = ReadyAnnouncer(self, RECORDER, self._ready_to_record,
-                                     lambda: CLOCK in self.last_tick)
+        self._ready = Readiness(self, self._ready_to_record, lambda: CLOCK in self.last_tick)
         self._progress_publisher = self.create_publisher(UInt64, RECORDED, PROGRESS_QOS)
         self._progress = UInt64()
         self._timer = self.create_timer(0.02, self._poll, clock=steady_clock())
@@ -119,11 +112,15 @@ class RecorderNode(Node):
 
     def _ready_to_record(self) -> bool:
         """Ready once every topic the graph must have has a publisher: its channels are opened
-        first (OSError if the bag cannot be written)."""
-        if not all(s.get_publisher_count() >= 1 for topic, s in self.subscriptions_by_topic.items()
-                   if topic not in OPTIONAL):
+        first (never, if the bag cannot be written)."""
+        if self.failure or not all(s.get_publisher_count() >= 1 for topic, s in
+                                   self.subscriptions_by_topic.items() if topic not in OPTIONAL):
             return False
-        self._open_channels()
+        try:
+            self._open_channels()
+        except OSError as error:
+            self._write_failed(error)
+            return False
         return True
 
     def _write_failed(self, error: OSError) -> None:
@@ -166,7 +163,6 @@ class RecorderNode(Node):
         if not self.failure:
             try:
                 self.bag.flush_if_due()
-                self._ready.poll()
             except OSError as error:
                 self._write_failed(error)
                 return
@@ -210,7 +206,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv if argv is None else argv
     with ros_session(argv) as signals:
         try:
-            node = RecorderNode()
+            node = RecorderNode(given_parameters(argv))
         except ParamError as error:
             print(f"recorder: error: {error}", file=sys.stderr)
             return 2

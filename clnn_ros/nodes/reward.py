@@ -3,29 +3,53 @@
 [0,0] otherwise; it also tells the agent when the trial is over.
 
     python -m clnn_ros.nodes.reward --ros-args -p sigma:=256
+
+Subscribes cartpole/state(t); publishes rln/reward(t). Ends on trial/event EPISODE_END.
 """
 
 from __future__ import annotations
 
-from clnn_ros_msgs.msg import CartPoleState, Reward
+from clnn_ros_msgs.msg import CartPoleState, Reward, TrialEvent
+from rclpy.node import Node
+from rclpy.task import Future
 
 from ..core.rln import NONE, ONE_HOT, REWARD_KINDS
+from ..graph.fields import tick_nanoseconds
+from ..graph.lockstep import Refusals, TickJoin
+from ..graph.names import REWARD, STATE, TRIAL_EVENT
+from ..graph.run import NODE_PARAMETERS
 from ..init_weights import episode_start
-from ..names import REWARD, STATE
-from .common import GraphNode, TickJoin, node_main
+from .glue import (LOCKSTEP_QOS, Readiness, checked, declare_run_parameters,
+                   endpoints_matched, ends_with_the_episode, run_node, stamp, use_sim_time)
 
 
-class RewardNode(GraphNode):
-    def __init__(self, **options):
-        # reward subscribers: agent, trial manager
-        super().__init__("reward", {"reward_pub": (Reward, REWARD, 2)}, **options)
+class RewardNode(Node):
+    def __init__(self, run: dict, **node_options):
+        super().__init__("reward", **node_options)
+        self.params, settings = declare_run_parameters(self, run)
+        use_sim_time(self)
+        self.tau_ns = tick_nanoseconds(self.params.tau)
         # a resumed episode (init_weights: a checkpoint) continues a carried success count
-        self.counter = episode_start(self.settings["init_weights"], self.settings["seed"],
-                                     self.params).success_counter(self.params)
+        self.counter = episode_start(settings["init_weights"], settings["seed"], self.params,
+                                     NODE_PARAMETERS["reward"]).success_counter(self.params)
         self.trial = -1
+        self.finished, self.failure = Future(), None
+        self.refusals = Refusals(self.get_logger().error)
+        self.join = TickJoin((STATE,), self.on_tick, self.refusals)
         self.reward_msg = Reward()  # one message object, refilled each tick
-        self.join = TickJoin(self, (STATE,), self.on_tick)
-        self.subscribe(CartPoleState, STATE, lambda msg: self.join.offer(STATE, msg))
+        self.reward_pub = self.create_publisher(Reward, REWARD, LOCKSTEP_QOS)
+        state_sub = self.create_subscription(
+            CartPoleState, STATE,
+            checked(STATE, self.params, self.refusals, lambda msg: self.join.offer(STATE, msg)),
+            LOCKSTEP_QOS)
+        self.create_subscription(TrialEvent, TRIAL_EVENT, checked(
+            TRIAL_EVENT, self.params, self.refusals,
+            ends_with_the_episode(self.finished, self.refusals, lambda: self.join.tick)),
+            LOCKSTEP_QOS)
+        # rewards go to the agent and the trial manager
+        self.readiness = Readiness(self, endpoints_matched(
+            settings["extra_nodes"], [(self.reward_pub, 2)], [state_sub]),
+            is_running=lambda: self.join.tick > 0)
 
     def on_tick(self, inbox: dict) -> None:
         msg = inbox[STATE]
@@ -39,10 +63,11 @@ class RewardNode(GraphNode):
         out.reward_one_hot, out.kind = ONE_HOT[kind], REWARD_KINDS[kind]
         out.success_counter = self.counter.count
         out.trial_over = msg.failed or msg.successful_steps >= self.params.max_steps
-        self.reward_pub.publish(self.stamp(out, msg.tick, msg.trial))
+        self.reward_pub.publish(stamp(out, msg.tick, msg.trial, self.tau_ns))
+
 
 def main() -> None:
-    raise SystemExit(node_main(RewardNode))
+    raise SystemExit(run_node(RewardNode))
 
 
 if __name__ == "__main__":

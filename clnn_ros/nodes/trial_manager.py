@@ -25,8 +25,6 @@ file) and at the end (final_weights.npy, summary.json).
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 import os
 import time
@@ -36,18 +34,23 @@ from pathlib import Path
 import numpy as np
 from clnn_ros_msgs.msg import Action, CartPoleState, Reward, SpikeVector, TrialEvent, WeightSnapshot
 from rosgraph_msgs.msg import Clock
+from rclpy.node import Node
+from rclpy.task import Future
 from std_msgs.msg import String, UInt64
 
 from ..core.episode import seed_setup
 from ..files import describe_write_error, write_atomically, write_text_atomically
+from ..graph.content import network_action_problem
+from ..graph.fields import REACHED_MAX_STEPS, tick_nanoseconds, tick_stamp, trials_csv
+from ..graph.lockstep import Refusals, TickJoin
+from ..graph.names import (ACTION, CLOCK, GRAPH_NODES, NOT_STARTED, PUBLISHED_BY, READY,
+                           RECORDED, RECORDER, REWARD, SPIKES, STATE, TRIAL_EVENT, TRIAL_MANAGER,
+                           WEIGHTS)
+from ..graph.qos import RECORDER_WINDOW
+from ..graph.run import NODE_PARAMETERS, names_list
 from ..init_weights import episode_start
-from ..message_fields import REACHED_MAX_STEPS, TRIALS_CSV_HEADER
-from ..names import (ACTION, CLOCK, GRAPH_NODES, NOT_STARTED, PUBLISHED_BY, READY, RECORDED,
-                     RECORDER, REWARD,
-                     SPIKES, STATE, TRIAL_EVENT, TRIAL_MANAGER, WEIGHTS)
-from .common import (PROGRESS_QOS, READY_QOS, RECORDER_WINDOW, GraphNode, TickJoin, node_main,
-                     steady_clock)
-from .parameters import names_list
+from .glue import (LOCKSTEP_QOS, PROGRESS_QOS, READY_QOS, checked, declare_run_parameters,
+                   endpoints_matched, run_node, stamp, steady_clock)
 
 WATCHDOG_S = 0.1
 GRAPH_CHECK_S = 0.5  # how often the ROS graph is looked at for nodes that left it
@@ -60,14 +63,14 @@ WAITING_NOTE_S = 10.0  # while the graph is not ready, a note of what it waits f
 CHAIN = (STATE, SPIKES, REWARD, ACTION)
 
 
-class TrialManagerNode(GraphNode):
-    listens_to_trial_events = False
-    driven_by_clock = False  # it publishes the clock
-
-    def __init__(self, **options):
-        # clock: environment; trial/event: environment, encoder, reward, agent
-        super().__init__(TRIAL_MANAGER, {"clock_pub": (Clock, CLOCK, 1),
-                                         "event_pub": (TrialEvent, TRIAL_EVENT, 4)}, **options)
+class TrialManagerNode(Node):
+    def __init__(self, run: dict, **node_options):
+        super().__init__(TRIAL_MANAGER, **node_options)  # its time is its own: it has the clock
+        self.params, self.settings = declare_run_parameters(self, run)
+        self.tau_ns = tick_nanoseconds(self.params.tau)
+        self.extra_nodes = names_list(self.settings["extra_nodes"])
+        self.finished, self.failure = Future(), None
+        self.refusals = Refusals(self.get_logger().error)
         _, self.angles = seed_setup(self.settings["seed"], self.params)
         self.results = []  # (trial, initial angle, steps, end reason)
         self.clock_msg = Clock()
@@ -77,7 +80,7 @@ class TrialManagerNode(GraphNode):
         self.last_trial_tick = None  # set when the last trial is over
         # a resumed episode (init_weights: a checkpoint) starts at the checkpoint's next trial
         self.trial = episode_start(self.settings["init_weights"], self.settings["seed"],
-                                   self.params).first_trial
+                                   self.params, NODE_PARAMETERS[TRIAL_MANAGER]).first_trial
         self.created_at = time.monotonic()
         self.started_at = None
         self.ready = set()
@@ -89,14 +92,22 @@ class TrialManagerNode(GraphNode):
         self.stalled_s = 0.0  # running time of this node without progress
         self.not_started = False  # another graph of the same names runs
         self.exit_reason = ""
-        self.join = TickJoin(self, (STATE, ACTION), self.on_tick)
+        self.join = TickJoin((STATE, ACTION), self.on_tick, self.refusals)
         self.current = {topic: -1 for topic in CHAIN}  # the last tick each topic gave
-        self.last_refused = {}  # topic: what was refused last on it
-        self.subscribe(CartPoleState, STATE, self.seen(STATE))
-        self.subscribe(SpikeVector, SPIKES, self.seen(SPIKES))
-        self.subscribe(Reward, REWARD, self.seen(REWARD))
-        self.subscribe(Action, ACTION, self.seen(ACTION))
-        self.subscribe(WeightSnapshot, WEIGHTS, self.on_weights)
+        self.clock_pub = self.create_publisher(Clock, CLOCK, LOCKSTEP_QOS)
+        self.event_pub = self.create_publisher(TrialEvent, TRIAL_EVENT, LOCKSTEP_QOS)
+        inputs = [self.create_subscription(
+            msg_type, topic, checked(topic, self.params, self.refusals, self.seen(topic),
+                                     network_action_problem if topic == ACTION else None),
+            LOCKSTEP_QOS)
+            for msg_type, topic in ((CartPoleState, STATE), (SpikeVector, SPIKES),
+                                    (Reward, REWARD), (Action, ACTION))]
+        inputs.append(self.create_subscription(
+            WeightSnapshot, WEIGHTS, checked(WEIGHTS, self.params, self.refusals,
+                                             self.on_weights), LOCKSTEP_QOS))
+        # the clock goes to the environment; trial events to the four other nodes
+        self.matched = endpoints_matched(self.settings["extra_nodes"],
+                                         [(self.clock_pub, 1), (self.event_pub, 4)], inputs)
         self.create_subscription(String, READY, self.on_ready, READY_QOS)
         self.recorded_tick = -1
         self.held = None  # (tick, starts a trial): the next tick, waiting for the recorder
@@ -112,17 +123,13 @@ class TrialManagerNode(GraphNode):
             if topic in (STATE, ACTION):
                 accepted = self.join.offer(topic, msg)
             elif msg.tick != self.current[topic] + 1 or msg.tick > self.join.tick:
-                self.refuse(topic, msg, f"expected tick {self.current[topic] + 1}")
+                self.refusals.refuse(topic, msg, f"expected tick {self.current[topic] + 1}")
                 accepted = False
             else:
                 accepted = True
             if accepted:
                 self.current[topic] = msg.tick
         return receive
-
-    def refuse(self, topic: str, msg, reason: str, kind: str = "tick") -> None:
-        super().refuse(topic, msg, reason, kind)
-        self.last_refused[topic] = f"tick {getattr(msg, 'tick', '?')}: {reason}"
 
     def on_ready(self, msg: String) -> None:
         self.ready.add(msg.data)
@@ -141,7 +148,8 @@ class TrialManagerNode(GraphNode):
         action) or of the trial's last tick, once."""
         if msg.tick != self.join.tick and (msg.tick != self.trial_end_tick or
                                            self.weights_tick == msg.tick):
-            self.refuse(WEIGHTS, msg, f"expected the weights after tick {self.trial_end_tick}")
+            self.refusals.refuse(WEIGHTS, msg, f"expected the weights after tick "
+                                               f"{self.trial_end_tick}")
             return
         self.final_weights = np.array(msg.weights).reshape(msg.neurons, msg.segments, msg.inputs)
         self.weights_tick = msg.tick
@@ -221,8 +229,8 @@ class TrialManagerNode(GraphNode):
         topic = next((t for t in CHAIN if self.current[t] < tick), None)
         if topic is None:  # all of the tick is in: only the final weights are missing
             topic = WEIGHTS
-        refused = f"; last refused {topic}: {self.last_refused[topic]}" \
-            if topic in self.last_refused else ""
+        refused = f"; last refused {topic}: {self.refusals.last[topic]}" \
+            if topic in self.refusals.last else ""
         return f"stall: node '{PUBLISHED_BY[topic]}' went silent at tick {tick} (no " \
                f"progress for {timeout:g} s{refused})"
 
@@ -235,14 +243,14 @@ class TrialManagerNode(GraphNode):
             self.held = (tick, starts_trial)
             return
         if starts_trial:
-            self.event_pub.publish(self.stamp(TrialEvent(
+            self.event_pub.publish(stamp(TrialEvent(
                 event=TrialEvent.START, initial_angle_deg=float(self.angles[self.trial]),
-                seed=self.settings["seed"]), tick, self.trial))
+                seed=self.settings["seed"]), tick, self.trial, self.tau_ns))
         self.publish_clock(tick)
 
     def publish_clock(self, tick: int) -> None:
         clock = self.clock_msg  # one message object, refilled each tick
-        clock.clock.sec, clock.clock.nanosec = divmod(tick * self.tau_ns, 1_000_000_000)
+        clock.clock.sec, clock.clock.nanosec = tick_stamp(tick, self.tau_ns)
         self.clock_pub.publish(clock)
 
     def on_tick(self, inbox: dict) -> None:
@@ -256,10 +264,10 @@ class TrialManagerNode(GraphNode):
         self.trial_end_tick = tick
         self.results.append((self.trial, float(self.angles[self.trial]), state.successful_steps,
                              reason))
-        self.event_pub.publish(self.stamp(TrialEvent(
+        self.event_pub.publish(stamp(TrialEvent(
             event=TrialEvent.END, initial_angle_deg=float(self.angles[self.trial]),
             successful_steps=state.successful_steps, end_reason=reason,
-            seed=self.settings["seed"]), tick, self.trial))
+            seed=self.settings["seed"]), tick, self.trial, self.tau_ns))
         self.report(tick)
         if problem := self.save(self.write_trials):
             self.stop(1, problem, tick)
@@ -290,16 +298,17 @@ class TrialManagerNode(GraphNode):
         if self.finished.done():
             return
         tick = self.join.tick if tick is None else tick
-        self.event_pub.publish(self.stamp(TrialEvent(
+        self.event_pub.publish(stamp(TrialEvent(
             event=TrialEvent.EPISODE_END, end_reason=reason, seed=self.settings["seed"],
-            successful_steps=self.results[-1][2] if self.results else 0), tick, self.trial))
+            successful_steps=self.results[-1][2] if self.results else 0), tick, self.trial,
+            self.tau_ns))
         self.exit_reason = reason
         if (problem := self.save(self.write_results, tick)) and not exit_code:
             exit_code, reason = 1, problem
             self.exit_reason = reason
         if exit_code:
             self.get_logger().error(reason)
-        self.finish(exit_code)
+        self.finished.set_result(exit_code)
 
     def save(self, write, *args) -> str | None:
         """Run a writer of out_dir's files; the one-line problem if a file cannot be written
@@ -314,11 +323,8 @@ class TrialManagerNode(GraphNode):
         return None
 
     def write_trials(self, out: Path) -> None:
-        text = io.StringIO()
-        writer = csv.writer(text)
-        writer.writerow(TRIALS_CSV_HEADER)
-        writer.writerows([self.settings["seed"], *r] for r in self.results)
-        write_text_atomically(out / "trials.csv", text.getvalue())
+        write_text_atomically(out / "trials.csv", trials_csv(
+            [self.settings["seed"], *result] for result in self.results))
 
     def write_results(self, out: Path, tick: int) -> None:
         self.write_trials(out)
@@ -338,7 +344,7 @@ class TrialManagerNode(GraphNode):
 
 
 def main() -> None:
-    raise SystemExit(node_main(TrialManagerNode))
+    raise SystemExit(run_node(TrialManagerNode, on_interrupt=TrialManagerNode.interrupted))
 
 
 if __name__ == "__main__":

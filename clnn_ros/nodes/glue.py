@@ -1,0 +1,215 @@
+"""rclpy glue the graph's nodes share, by composition: their QoS, their parameters declared from
+the run's description, the content check of an input, readiness, and main(). The contract itself
+(names, rules, the run's parameters) is clnn_ros.graph's."""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from typing import Callable
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.clock import Clock, ClockType
+from rclpy.duration import Duration
+from rclpy.node import Node
+from rclpy.parameter import Parameter, get_parameter_value, parameter_value_to_python
+from rclpy.task import Future
+from std_msgs.msg import String
+
+from ..core.params import ParamError, Params
+from ..graph import qos
+from ..graph.content import RULES
+from ..graph.fields import EPISODE_END, tick_stamp
+from ..graph.lockstep import Refusals, episode_end_problem
+from ..graph.names import READY, TRIAL_EVENT
+from ..graph.run import (DESCRIPTIONS, declared_values, node_parameters, read_params_file,
+                         names_list)
+from ..rclpy_session import qos_profile, ros_session, spin_until_finished, split_ros_arguments
+
+LOCKSTEP_QOS = qos_profile(qos.LOCKSTEP)
+READY_QOS = qos_profile(qos.READY)
+PROGRESS_QOS = qos_profile(qos.PROGRESS)
+ACK_WAIT_S = 2.0  # a node's last messages reach the recorder before the node exits (or this)
+
+
+def steady_clock() -> Clock:
+    """For timers that must run before and between ticks (a node with use_sim_time's default
+    clock stands still until /clock moves)."""
+    return Clock(clock_type=ClockType.STEADY_TIME)
+
+
+def declare_run_parameters(node: Node, run: dict, own: dict | None = None) -> tuple[Params, dict]:
+    """The node's part of the run's values (graph.run.node_parameters: validated, a ParamError
+    line otherwise), each declared read-only with its description and range; `own`: {name:
+    (default, description)} of a node outside the model (the recorder's)."""
+    defaults = {name: default for name, (default, _) in (own or {}).items()}
+    params, settings = node_parameters(run, node.get_name(), defaults)
+    for name, value in declared_values(params, settings, node.get_name()).items():
+        text = own[name][1] if name in (own or {}) else None
+        node.declare_parameter(name, list(value) if isinstance(value, tuple) else value,
+                               descriptor(name, text), ignore_override=True)
+    return params, settings
+
+
+def descriptor(name: str, text: str | None = None) -> ParameterDescriptor:
+    """Read-only (every parameter is read once, at the start), with its description and range."""
+    text, constraint = (text, None) if text else DESCRIPTIONS[name]
+    result = ParameterDescriptor(name=name, description=text, read_only=True)
+    if constraint and isinstance(constraint[0], str):
+        result.additional_constraints = "one of: " + ", ".join(constraint)
+    elif constraint and isinstance(constraint[0], int):
+        result.integer_range = [IntegerRange(from_value=constraint[0], to_value=constraint[1],
+                                             step=1)]
+    elif constraint:
+        result.floating_point_range = [FloatingPointRange(from_value=constraint[0],
+                                                          to_value=constraint[1])]
+    return result
+
+
+def given_parameters(argv: list[str]) -> dict:
+    """The parameter values of a node's command line, as rcl applies them: its --params-file
+    sections (every node's: the run's description gives all nodes the same values) and -p
+    rules, a later one over an earlier."""
+    tokens, values = split_ros_arguments(argv)[0], {}
+    for option, value in zip(tokens, tokens[1:]):
+        if option == "--params-file":
+            values.update(read_params_file(value))
+        elif option in ("-p", "--param"):
+            name, _, text = value.partition(":=")
+            values[name] = parameter_value_to_python(get_parameter_value(text))
+    return values
+
+
+def checked(topic: str, params: Params, refusals: Refusals, callback: Callable,
+            rule: Callable | None = None):
+    """A subscription callback: a message goes to `callback` only if it keeps the topic's
+    content rule (graph.content.RULES, or `rule`); otherwise it is refused."""
+    rule = rule or RULES[topic]
+
+    def receive(msg) -> None:
+        reason = rule(msg, params)
+        if reason is None:
+            callback(msg)
+        else:
+            refusals.refuse(topic, msg, reason, kind="content")
+    return receive
+
+
+def stamp(msg, tick: int, trial: int, tau_ns: int):
+    """Fill the fields every message of the graph has: the tick's sim time, tick and trial."""
+    msg.header.stamp.sec, msg.header.stamp.nanosec = tick_stamp(tick, tau_ns)
+    msg.tick, msg.trial = tick, trial
+    return msg
+
+
+def ends_with_the_episode(finished: Future, refusals: Refusals,
+                          current_tick: Callable[[], int]) -> Callable:
+    """A trial/event callback that finishes the node (exit status 0) on this graph's
+    EPISODE_END; one of another tick is refused (graph.lockstep.episode_end_problem)."""
+    def on_event(event) -> None:
+        if event.event != EPISODE_END:
+            return
+        if problem := episode_end_problem(event.tick, current_tick()):
+            refusals.refuse(TRIAL_EVENT, event, problem)
+        elif not finished.done():
+            finished.set_result(0)
+    return on_event
+
+
+def endpoints_matched(extra_nodes: str, outputs: list[tuple[object, int]],
+                      inputs: list) -> Callable[[], bool]:
+    """Whether each publisher of `outputs` [(publisher, subscribers the graph gives it)] has
+    matched those and the extra_nodes' (the recorder), and each input subscription its
+    publisher. Discovery is one-sided: a reader drops what a writer sends until it has matched
+    the writer too, so a start before both sides matched made the first tick wait on discovery
+    (a healthy node named "silent at tick 0" on a loaded machine)."""
+    extra = len(names_list(extra_nodes))
+
+    def matched() -> bool:
+        return (all(p.get_subscription_count() >= n + extra for p, n in outputs) and
+                all(s.get_publisher_count() >= 1 for s in inputs))
+    return matched
+
+
+class Readiness:
+    """Announces the node's name on READY once `is_ready()` (endpoints_matched), then again
+    every READY_REPEAT_S until `is_running()`: a trial manager that missed the one announcement
+    would wait forever."""
+
+    def __init__(self, node: Node, is_ready: Callable[[], bool], is_running: Callable[[], bool]):
+        self.is_ready, self.is_running, self.name = is_ready, is_running, node.get_name()
+        self._publisher = node.create_publisher(String, READY, READY_QOS)
+        self._announced_at = -qos.READY_REPEAT_S
+        self._timer = node.create_timer(0.02, self._poll, clock=steady_clock())
+
+    def cancel(self) -> None:
+        """No more announcements."""
+        self._timer.cancel()
+
+    def _poll(self) -> None:
+        if self.is_running():
+            self.cancel()
+            return
+        now = time.monotonic()
+        if now - self._announced_at >= qos.READY_REPEAT_S and self.is_ready():
+            self._publisher.publish(String(data=self.name))
+            self._announced_at = now
+
+
+def deliver_published(node: Node) -> None:
+    """Wait (ACK_WAIT_S at most in all) until every subscriber has acknowledged what the node
+    published: what a lagging subscriber (the recorder) has not received yet is lost with the
+    process otherwise."""
+    deadline = time.monotonic() + ACK_WAIT_S
+    for publisher in node.publishers:
+        remaining = deadline - time.monotonic()
+        if remaining <= 0 or not publisher.wait_for_all_acked(Duration(seconds=remaining)):
+            return
+
+
+def run_node(make_node: Callable[[dict], Node], argv: list[str] | None = None,
+             on_interrupt: Callable[[Node], None] | None = None) -> int:
+    """Run one node in its own process until its `finished` future is done; returns the exit
+    status. `make_node(run)` builds it from the run's values given on the command line; the
+    node has `finished` (a Future of its exit status), `failure` (None, or why it failed: a
+    full disk) and `refusals` (graph.lockstep.Refusals). Bad parameters: one error line, exit
+    2. A failure: one line, exit 1. SIGINT/SIGTERM: `on_interrupt(node)`, then a clean
+    shutdown, 128 + the signal."""
+    argv = sys.argv if argv is None else argv
+    prog = os.path.basename(argv[0])
+    unexpected = split_ros_arguments(argv)[1][1:]
+    if unexpected:  # rclpy would ignore them: e.g. a --params-file before --ros-args
+        print(f"{prog}: error: unexpected arguments {unexpected}: a node takes ROS arguments "
+              f"only, after --ros-args", file=sys.stderr)
+        return 2
+    with ros_session(argv) as signals:
+        try:
+            node = make_node(given_parameters(argv))
+        except ParamError as error:
+            print(f"{prog}: error: {error}", file=sys.stderr)
+            return 2
+        try:
+            spin_until_finished([node], node.finished, signals)
+            if signals:
+                if on_interrupt is not None:
+                    on_interrupt(node)
+                return 128 + signals[0]
+            if node.failure:
+                print(f"{prog}: error: {node.failure}", file=sys.stderr, flush=True)
+            return node.finished.result()
+        finally:
+            close_node(node)
+
+
+def close_node(node: Node) -> None:
+    """Log what the node refused, let its last messages reach their subscribers, destroy it."""
+    if summary := node.refusals.summary():
+        node.get_logger().warning(summary)
+    deliver_published(node)
+    node.destroy_node()
+
+
+def use_sim_time(node: Node) -> None:
+    """The node's time is the graph's sim time (/clock, from the trial manager)."""
+    node.set_parameters([Parameter("use_sim_time", Parameter.Type.BOOL, True)])

@@ -1,0 +1,29 @@
+"""SIGINT and SIGTERM recorded instead of raised, for every process of the graph and run_all: a
+loop then ends between two steps, never inside one (a publish on a context that is shutting down
+fails; a half-written file). No ROS import."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+
+# run_all gives each child a pipe on stdin that it never writes to: end of file means run_all
+# is gone (even killed with SIGKILL), and the child stops as on SIGTERM.
+EXIT_WITH_STDIN = "CLNN_ROS_EXIT_WITH_STDIN"
+
+
+def catch_signals() -> list[int]:
+    """The signals received so far (a list that grows). With EXIT_WITH_STDIN set, the end of
+    stdin counts as SIGTERM."""
+    received = []
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda number, _frame: received.append(number))
+    if os.environ.get(EXIT_WITH_STDIN) == "1":
+        def watch_stdin() -> None:
+            while os.read(sys.stdin.fileno(), 4096):
+                pass
+            received.append(signal.SIGTERM)
+        threading.Thread(target=watch_stdin, daemon=True, name="stdin-watch").start()
+    return received
