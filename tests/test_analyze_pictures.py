@@ -16,6 +16,8 @@ from PIL import Image
 
 from clnn_ros import analysis_figures as pictures
 from clnn_ros import analyze as analysis
+from clnn_ros.analysis_data import metadata_record
+from clnn_ros.analysis_summary import environment_lines
 from clnn_ros.bag import open_bag
 from clnn_ros.core.params import Params
 from clnn_ros.figures import plt
@@ -100,7 +102,7 @@ def test_environment_lines_name_the_node_and_its_physics():
             ("external", "an external node", "the external node's own"),
             ("python my_env.py", "your own node: `python my_env.py`", "the node's own")):
         data["record"] = {"environment": environment}
-        lines = analysis.environment_lines(data, labels)
+        lines = environment_lines(data, labels)
         assert lines[0].startswith(f"* environment: {node}"), lines[0]
         assert lines[1].startswith(f"* physics: {physics}"), lines[1]
         assert lines[3] == "* velocity edge: 0.28 m/s (cart velocity intervals: below -e, " \
@@ -266,7 +268,7 @@ def test_a_run_with_its_own_environment_node_says_so(ros_env, tmp_path):
     assert run.returncode == 0, run.stderr
     reader, stream = open_bag(tmp_path / "run" / "bag")
     with stream:
-        assert analysis.metadata_record(reader)["environment"] == command
+        assert metadata_record(reader)["environment"] == command
     result = analyze(tmp_path / "run" / "bag", "--out", tmp_path / "analysis")
     assert result.returncode == 0, result.stderr
     summary = (tmp_path / "analysis" / "summary.md").read_text()

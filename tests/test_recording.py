@@ -20,8 +20,9 @@ import numpy as np
 import pytest
 import yaml
 
-from clnn_ros import bag, names
-from clnn_ros.names import STATE
+from clnn_ros import bag
+from clnn_ros.graph import names
+from clnn_ros.graph.names import STATE
 
 from test_graph import processes_with, wait_for_line
 

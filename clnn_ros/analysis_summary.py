@@ -1,0 +1,141 @@
+"""summary.md of an analysis (clnn_ros.analyze): what the bag holds and what the run did
+(environment, physics, encoding), the trials, and what each picture shows."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .analysis_data import gaps, input_labels
+from .graph.names import TOPIC_TYPES, absolute
+
+# What each picture shows, for summary.md ({trial}: the chosen trial; trial_N.gif: ANIMATION).
+PICTURES = {
+    "learning_curve.png": "successful steps per trial, coloured by how each trial ended",
+    "traces.png": "trial {trial} against the tick: cart position and velocity, pole angle and "
+                  "angular velocity, action, reward and punishment, scaled to the motion",
+    "raster.png": "trial {trial}'s spikes tick by tick (a long trial's first and last 200 "
+                  "ticks, under an overview of the whole trial: the share of ticks each input "
+                  "spiked), with the action, rewards and punishments",
+    "weights.png": "the last weight snapshot, per neuron: segments (from 0) x the bag's input "
+                   "intervals, on a colour scale from 0 to w_max; below, each weight's change "
+                   "since the first snapshot",
+    "weights_history.png": "every weight over the run, one panel per neuron and segment, one "
+                           "line per input, a point per snapshot (trial end)",
+}
+ANIMATION = "trial {trial}'s cart and pole, with each tick's spikes and action beside them"
+# The recorder's `environment` (run_all's --env, or its --env-node command): what ran, and
+# whose physics. Bags recorded before it was kept have none.
+ENVIRONMENTS = {
+    "cartpole": ("the built-in cart-pole node (`python -m clnn_ros.nodes.environment`)",
+                 "`{physics}` equations, `{integrator}` integration (the built-in node's)"),
+    "gymnasium": ("gymnasium's CartPole-v1 node (`python -m clnn_ros.nodes.gymnasium_env`)",
+                  "gymnasium's CartPole-v1 (the run's physics parameter does not apply)"),
+    "mujoco": ("the MuJoCo cart-pole node (`python -m clnn_ros.nodes.mujoco_env`)",
+               "MuJoCo's, with gymnasium CartPole-v1's constants (the run's physics parameter "
+               "does not apply)"),
+    "external": ("an external node (`run_all --env external`: started outside run_all)",
+                 "the external node's own (the graph's parameter physics={physics}, which it "
+                 "may ignore)"),
+}
+OWN_ENVIRONMENT = ("your own node: `{command}` (`run_all --env-node`)",
+                   "the node's own (the graph's parameter physics={physics}, which it may "
+                   "ignore)")
+UNRECORDED_ENVIRONMENT = ("not recorded in this bag (a recorder that run_all did not start, or "
+                          "an older recording)",
+                          "parameter physics={physics}, integrator={integrator} (which node "
+                          "computed it is not recorded)")
+
+
+def environment_lines(data: dict, labels: list[str]) -> list[str]:
+    """Markdown list items: the environment node, its physics, the encoding, the velocity
+    edge."""
+    params = data["params"]
+    name = data["record"].get("environment", "")
+    node, physics = ENVIRONMENTS.get(name) or (OWN_ENVIRONMENT if name else
+                                               UNRECORDED_ENVIRONMENT)
+    variables = "pole angle" if params.nsv == 1 else "pole angle and cart velocity"
+    edges = ", ".join(f"{e:g}" for e in params.angle_edges_deg)
+    velocity = (f"{params.velocity_edge:g} m/s (cart velocity intervals: below -e, [-e, e), e "
+                f"and above)" if params.nsv == 2 else
+                f"not used: 1 state variable encodes the pole angle only (parameter "
+                f"{params.velocity_edge:g} m/s)")
+    return [f"* environment: {node.format(command=name)}",
+            f"* physics: " + physics.format(physics=params.physics,
+                                            integrator=params.integrator),
+            f"* encoding: {variables} ({params.nsv} state variable{'s' * (params.nsv > 1)}), "
+            f"{len(labels)} inputs: "
+            + ", ".join(f"`{label}`" for label in labels) + f" (angle edges {edges} deg)",
+            f"* velocity edge: {velocity}"]
+
+
+def summary_markdown(bag_path: Path, result: dict, salvage: bool) -> str:
+    """summary.md's text, from what analyze() found and wrote (`result`)."""
+    data, rows, chosen = result["data"], result["rows"], result["chosen"]
+    steps = [r[3] for r in rows]
+    params = data["params"]
+    cap = params.max_steps
+    end = result["episode_end"]
+    inputs = result["final"].shape[2] if result["final"] is not None else params.n_inputs
+    lines = [f"# Analysis of `{bag_path.name}`", "",
+             "Rebuilt from the bag alone by `python -m clnn_ros.analyze`"
+             + (" (salvaged: the file was not finished, only its complete chunks)" if salvage
+                else "") + ".", "",
+             "## Run", "",
+             f"* seed {result['seed']}, step cap {cap:,}",
+             *environment_lines(data, input_labels(data, inputs)),
+             "* how it ended: " + (f"EPISODE_END, `{end.end_reason}` at tick {end.tick}" if end
+                                    else "no EPISODE_END in the bag (interrupted, or the "
+                                         "recorder was killed)"),
+             f"* trials completed: {len(rows)}" + (
+                 f"; mean successful steps {np.mean(steps):.1f}, best {max(steps):,}, last "
+                 f"{steps[-1]:,}" if rows else ""),
+             ]
+    first_cap = next((r[1] for r in rows if r[3] >= cap), None)
+    if rows:
+        lines.append("* first trial to reach the step cap: "
+                     + (f"trial {first_cap}" if first_cap is not None else "none"))
+        ends = {}
+        for r in rows:
+            ends[r[4]] = ends.get(r[4], 0) + 1
+        lines.append("* trial ends: " + ", ".join(f"{k} {v}" for k, v in sorted(ends.items())))
+    pictures = {name: what.format(trial=chosen and chosen["trial"])
+                for name, what in PICTURES.items()}
+    if result["animated"] is not None:
+        pictures[f"trial_{result['animated']}.gif"] = ANIMATION.format(trial=result["animated"])
+    lines += ["", "## Pictures", ""]
+    lines += [f"* `{name}`: {what}" for name, what in pictures.items()
+              if name in result["produced"]]
+    lines += ["", "## Messages", "", "| topic | type | messages | ticks | missing ticks |",
+              "|---|---|---:|---|---:|"]
+    for topic, type_name in TOPIC_TYPES.items():
+        if topic in data["ticks"]:
+            first, last, missing = gaps(data["ticks"][topic])
+            span = f"{first}-{last}" if first >= 0 else "-"
+        else:
+            span, missing = "-", "-"
+        name = data["recorded_as"].get(topic, absolute(topic))
+        lines.append(f"| `{name}` | `{type_name}` | {data['counts'].get(topic, 0):,} | {span} "
+                     f"| {missing} |")
+    if rows:
+        lines += ["", "## Trials", "", "| trial | initial angle (deg) | steps | end |",
+                  "|---:|---:|---:|---|"]
+        lines += [f"| {r[1]} | {r[2]:g} | {r[3]:,} | {r[4]} |" for r in rows]
+    if chosen:
+        lines += ["", f"## Trial {chosen['trial']}", "",
+                  f"Ticks {chosen['start']}-{chosen['end']} ({chosen['ticks']} states in the "
+                  f"bag), {chosen['steps']:,} successful steps, ended by {chosen['end_reason']}.",
+                  "", "![traces](traces.png)"]
+        if "raster.png" in result["produced"]:
+            lines += ["", "![raster](raster.png)"]
+    if result["final"] is not None:
+        w = result["final"]
+        lines += ["", "## Weights", "",
+                  f"{w.shape[0]} neurons x {w.shape[1]} segments x {w.shape[2]} inputs, "
+                  f"published by the agent after trial {data['weights'][-1].trial} "
+                  f"(`weights.csv` has all {len(data['weights'])} snapshots).", "",
+                  "![weights](weights.png)", "", "![weights over the run](weights_history.png)"]
+    if rows:
+        lines += ["", "## Learning curve", "", "![learning curve](learning_curve.png)"]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,38 @@
+"""python -m clnn_ros.bag repair BAG [--out DIR]: the bag tools' command line."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from ..cli import OneLineArgumentParser
+from ..files import describe_write_error
+from .reader import BagError
+from .repair import repair
+
+
+def main(argv=None) -> int:
+    parser = OneLineArgumentParser(prog="python -m clnn_ros.bag", name="bag",
+                                   description="Tools for the project's bags.")
+    commands = parser.add_subparsers(dest="command", required=True)
+    repair_command = commands.add_parser(
+        "repair", help="a finalized copy of a bag whose recorder was killed",
+        description="Write a finalized, indexed copy (a new bag directory with metadata.yaml) of "
+                    "a bag whose recorder was killed: every message of its complete chunks.")
+    repair_command.add_argument("bag", type=Path, help="the bag directory, or its .mcap file")
+    repair_command.add_argument("--out", type=Path,
+                                help="the new bag directory (default: <bag>_repaired)")
+    args = parser.parse_args(argv)
+    try:
+        out, messages, complete = repair(args.bag, args.out)
+    except (BagError, OSError) as error:
+        reason = describe_write_error(error) if isinstance(error, OSError) else error
+        print(f"bag: error: {reason}", file=sys.stderr)
+        return 1
+    print(f"bag: {messages} messages" + (f" ({args.bag} was complete)" if complete else
+                                         " (every complete chunk)") + f" in {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

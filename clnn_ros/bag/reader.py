@@ -1,0 +1,126 @@
+"""Reading a bag: its MCAP file, opened whole or salvaged up to its last complete chunk, its
+messages raw in file order, and their decoding with the schemas the bag holds."""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import yaml
+
+from ..graph.fields import stamp_nanoseconds
+from ..graph.names import graph_topic
+from .directory import METADATA_FILE
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+class BagError(Exception):
+    """A bag that cannot be read (missing, not MCAP, truncated, not one of ours): one line."""
+
+
+def stamp_ns(cdr: bytes) -> int:
+    """Sim time of a serialized message whose first field is a builtin_interfaces/Time (every
+    message of the graph: the Header's stamp, or Clock.clock), without deserializing it."""
+    if len(cdr) < 12:
+        return 0
+    sec, nanosec = struct.unpack_from("<iI" if cdr[1] & 1 else ">iI", cdr, 4)
+    return stamp_nanoseconds(sec, nanosec)
+
+
+def mcap_file(path) -> Path:
+    """The MCAP file of a bag: that of a bag directory (the file its metadata.yaml names, else
+    its only .mcap) or an .mcap file itself. BagError (one line) if there is none."""
+    path = Path(path)
+    if path.is_dir():
+        metadata = path / METADATA_FILE
+        if metadata.is_file():
+            try:
+                files = yaml.safe_load(metadata.read_text())["rosbag2_bagfile_information"][
+                    "relative_file_paths"]
+                files = [str(name) for name in files]
+            except (OSError, UnicodeError, yaml.YAMLError, KeyError, TypeError) as error:
+                raise BagError(f"{metadata}: not a rosbag2 metadata file "
+                               f"({type(error).__name__})") from None
+            if len(files) != 1:
+                raise BagError(f"{path}: a bag of {len(files)} files (split): not supported")
+            if not (path / files[0]).is_file():
+                raise BagError(f"{path / files[0]}: no such file (named in {metadata})")
+            return path / files[0]
+        found = sorted(path.glob("*.mcap"))
+        if len(found) != 1:
+            raise BagError(f"{path}: no .mcap file in the directory" if not found else
+                           f"{path}: {len(found)} .mcap files and no {METADATA_FILE}")
+        return found[0]
+    if not path.is_file():
+        raise BagError(f"{path}: no such file or directory")
+    return path
+
+
+def check_magic(stream, path: Path) -> None:
+    """BagError unless the stream starts as an MCAP file does; it is left at its start."""
+    if stream.read(8) != MCAP_MAGIC:
+        raise BagError(f"{path}: not an MCAP file")
+    stream.seek(0)
+
+
+def open_bag(path, salvage: bool = False):
+    """Check that `path` (a bag directory or .mcap file) is a complete MCAP recording and return
+    (reader, stream). A truncated file (no footer/summary: the recorder was killed) is refused
+    unless `salvage`, which reads it linearly up to the last complete record."""
+    from mcap.exceptions import McapError
+    from mcap.reader import NonSeekingReader, SeekingReader
+
+    path = mcap_file(path)
+    stream = open(path, "rb")
+    try:
+        check_magic(stream, path)
+        try:
+            reader = SeekingReader(stream)
+            summary = reader.get_summary()
+            if summary is None or not summary.chunk_indexes and summary.statistics is None:
+                raise McapError("no summary")
+            return reader, stream
+        except (McapError, EOFError, ValueError, struct.error, OSError, StopIteration):
+            if not salvage:
+                raise BagError(f"{path}: truncated or damaged MCAP (no readable summary at "
+                               f"its end: was the recorder killed?); `python -m clnn_ros.bag "
+                               f"repair` makes a finished copy, --salvage reads its complete "
+                               f"chunks") from None
+        stream.seek(0)
+        return NonSeekingReader(stream), stream
+    except BaseException:
+        stream.close()
+        raise
+
+
+def iter_raw(reader, topics=None):
+    """(schema, topic, sim time (ns: the header stamp), log_time, cdr bytes, recorded topic name)
+    of the bag's messages in file order, the graph's topics by their relative names (a run in a
+    namespace reads as any other: "/robot1/clock" is "clock"); a salvaged (truncated) file ends
+    quietly at its last complete record."""
+    from mcap.exceptions import McapError
+    from mcap.reader import NonSeekingReader
+    try:
+        for schema, channel, message in reader.iter_messages(topics=topics,
+                                                             log_time_order=False):
+            yield (schema, graph_topic(channel.topic), stamp_ns(message.data), message.log_time,
+                   message.data, channel.topic)
+    except (McapError, EOFError, struct.error, ValueError) as error:
+        if not isinstance(reader, NonSeekingReader):
+            raise BagError(f"damaged MCAP: {error}") from None
+
+
+class Decoder:
+    """Decodes CDR with the schema embedded in the bag (mcap_ros2), not the installed types."""
+
+    def __init__(self):
+        from mcap_ros2.decoder import DecoderFactory
+        self.factory = DecoderFactory()
+        self.decoders = {}
+
+    def __call__(self, schema, cdr: bytes):
+        decoder = self.decoders.get(schema.id)
+        if decoder is None:
+            decoder = self.decoders[schema.id] = self.factory.decoder_for("cdr", schema)
+        return decoder(cdr)
