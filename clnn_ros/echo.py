@@ -26,10 +26,10 @@ from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before r
 
 import yaml
 
-from . import qos
 from .bag import message_class
 from .cli import OneLineArgumentParser
-from .names import TOPIC_TYPES, absolute, graph_topic
+from .graph import qos
+from .graph.names import TOPIC_TYPES, absolute, graph_topic
 
 
 class EchoError(Exception):
@@ -145,7 +145,7 @@ def main(argv=None) -> int:
     if args.raster and args.field:
         parser.error("--raster prints whole SpikeVectors: not with --field")
     import rclpy  # after the arguments: --help and a usage error need no ROS
-    from .nodes.common import qos_profile, ros_session
+    from .rclpy_session import qos_profile, ros_session
     with ros_session() as received:
         node = rclpy.create_node("echo", start_parameter_services=False, enable_rosout=False)
         try:

@@ -20,7 +20,7 @@ import rclpy
 from std_srvs.srv import Trigger
 
 from .cli import OneLineArgumentParser
-from .nodes.common import ros_session
+from .rclpy_session import ros_session
 
 
 def main(argv=None) -> int:

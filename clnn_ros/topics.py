@@ -28,11 +28,6 @@ from .cli import OneLineArgumentParser
 MIN_QUIET_S = 4.0
 
 
-def is_hidden(name: str) -> bool:
-    """ROS's convention: a name with a part starting with _ is hidden."""
-    return any(part.startswith("_") for part in name.split("/"))
-
-
 def graph_view(node) -> tuple[dict, bool]:
     """What discovery has found, but this node's own endpoints: {topic: (types, publishers,
     subscribers)}, each endpoint as (node namespace, node name, gid); and whether it is
@@ -83,7 +78,8 @@ def main(argv=None) -> int:
                         help="also the plumbing (names with a part starting with _)")
     args = parser.parse_args(argv)
     import rclpy  # after the arguments: --help and a usage error need no ROS
-    from .nodes.common import ros_session
+    from rclpy.topic_or_service_is_hidden import topic_or_service_is_hidden
+    from .rclpy_session import ros_session
     with ros_session() as received:
         # hidden (ROS's convention) and this process's own: its endpoints are left out
         node = rclpy.create_node(f"_topics_{os.getpid()}", start_parameter_services=False,
@@ -98,7 +94,7 @@ def main(argv=None) -> int:
                       f"topics: no other participant found in {args.wait:g} s on this "
                       f"ROS_DOMAIN_ID", file=sys.stderr)
             for name, (types, publishers, subscribers) in sorted(view.items()):
-                if not args.include_hidden_topics and is_hidden(name):
+                if not args.include_hidden_topics and topic_or_service_is_hidden(name):
                     continue
                 line = f"{name} [{', '.join(types)}]"
                 if args.count:
