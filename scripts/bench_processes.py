@@ -1,0 +1,188 @@
+"""The benchmark's runs as processes (scripts/benchmark_graph.py): the graph, started as run_all
+starts it but with the benchmark's instrumented node entry (bench_node.py), and the raw ring."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from bench_settings import REPO, ROLES, RUN_TIMEOUT_S, SEED, TEARDOWN_GRACE_S
+
+NODE_ENTRY = REPO / "scripts" / "bench_node.py"
+BENCHMARK = REPO / "scripts" / "benchmark_graph.py"
+
+
+def child_env(**extra) -> dict:
+    env = dict(os.environ)
+    env.update({k: str(v) for k, v in extra.items()})
+    return env
+
+
+def kill_group(p: subprocess.Popen) -> None:
+    if p.poll() is None:
+        try:
+            os.killpg(p.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+
+
+def run_group(commands: list[list[str]], env: dict, timeout: float) -> list[str]:
+    """Start the commands (each in its own process group), wait for all; on timeout (or an
+    interruption of the benchmark) kill them all. Returns each one's stdout; raises on a
+    failure."""
+    procs = []
+    try:
+        for c in commands:
+            procs.append(subprocess.Popen(c, cwd=REPO, env=env, stdin=subprocess.DEVNULL,
+                                          stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                          text=True, start_new_session=True))
+        deadline = time.monotonic() + timeout
+        outputs, failed = [], []
+        for p, c in zip(procs, commands):
+            try:
+                out, err = p.communicate(timeout=max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                for q in procs:
+                    kill_group(q)
+                out, err = p.communicate()
+                failed.append(f"{' '.join(c[-8:])}: timed out\n{err[-2000:]}")
+                continue
+            outputs.append(out)
+            if p.returncode != 0:
+                failed.append(f"{' '.join(c[-8:])}: exit {p.returncode}\n{err[-2000:]}")
+    except BaseException:
+        for q in procs:
+            kill_group(q)
+        raise
+    if failed:
+        raise RuntimeError("\n".join(failed))
+    return outputs
+
+
+class Bench:
+    """The benchmark's settings and working directory."""
+
+    def __init__(self, sizes: dict, work: Path):
+        self.sizes, self.work = sizes, work
+        self.forced_ring_exits = 0
+
+    def out_dir(self, name: str) -> Path:
+        return self.work / f"{name}_{time.monotonic_ns()}"
+
+    def graph_run(self, layout: str, executor: str, trials: int,
+                  profile: Path | None = None) -> dict:
+        """One episode of the graph without the recorder, as `run_all --quiet --no-record`
+        runs it (the run's values and node arguments from clnn_ros.graph.run; the trial manager
+        started last); its summary.json, with the per-tick latencies in microseconds
+        ("latency_us") unless profiled (`profile`: a file for the composed run, a folder of
+        ROLE.prof for the node processes)."""
+        from clnn_ros.graph.run import DEMO, node_arguments, run_values, write_params
+
+        out = self.out_dir(f"graph_{layout}_{executor}")
+        out.mkdir()
+        values, _ = run_values(DEMO, flags=dict(seed=SEED, trials=trials, progress=False,
+                                                simulator="cartpole"))
+        values["out_dir"] = str(out)
+        ticks_file = out / "ticks.json"
+        timing = [] if profile else ["--ticks-file", str(ticks_file)]
+        entry = [sys.executable, str(NODE_ENTRY)]
+        if layout == "composed":
+            values_file = out / "values.json"
+            values_file.write_text(json.dumps(values))
+            commands = [entry + ["composed", "--values", str(values_file), *timing]
+                        + (["--profile", str(profile)] if profile else [])]
+        else:
+            arguments = node_arguments(write_params(out / "params.yaml", values), "/")
+            commands = [entry + [role, *(timing if role == "trial_manager" else []),
+                                 *(["--profile", str(profile / f"{role}.prof")] if profile
+                                   else []), *arguments]
+                        for role in ROLES]
+        run_group(commands, child_env(CLNN_ROS_EXECUTOR=executor), RUN_TIMEOUT_S)
+        summary = json.loads((out / "summary.json").read_text())
+        if summary["exit_reason"] != "completed":
+            raise RuntimeError(f"graph run did not complete: {summary}")
+        if not profile:
+            record = json.loads(ticks_file.read_text())
+            published, completed = record["published"], record["completed"]
+            if len(published) != summary["ticks"] or len(completed) != summary["ticks"]:
+                raise RuntimeError(f"tick timing: {len(published)} clocks, {len(completed)} "
+                                   f"completions for {summary['ticks']} ticks")
+            summary["latency_us"] = [(c - p) / 1e3 for p, c in zip(published, completed)]
+        return summary
+
+    def ring_rate(self, layout: str, executor: str, msgs: str) -> dict:
+        me = [sys.executable, str(BENCHMARK)]
+        common = ["--ticks", str(self.sizes["ring_ticks"][layout, executor]), "--msgs", msgs]
+        if layout == "composed":
+            commands = [me + ["ring-composed", *common]]
+        else:  # the trial manager last, as run_all starts it
+            commands = [me + ["ring-stage", "--role", role, *common] for role in ROLES]
+        return self.run_ring(commands, child_env(CLNN_ROS_EXECUTOR=executor))
+
+    def run_ring(self, commands: list[list[str]], env: dict) -> dict:
+        """Run the ring's processes; the trial manager's (the last command's) RING_RESULT. A
+        ring process that has not exited TEARDOWN_GRACE_S after the result is in (seen:
+        rclpy/Fast DDS teardown hanging once in a while; the teardown is not measured) is
+        killed, its own Fast DDS shared-memory files removed, and counted in
+        self.forced_ring_exits."""
+        from clnn_ros.rosenv import own_fast_dds_files, remove_files_of_dead_process
+
+        base = self.out_dir("ring")
+        outs = [base.with_name(f"{base.name}_{i}.out") for i in range(len(commands))]
+        errs = [path.with_suffix(".err") for path in outs]
+        procs = []
+
+        def kill(p: subprocess.Popen) -> None:
+            names = own_fast_dds_files(p.pid)
+            kill_group(p)
+            p.wait()
+            remove_files_of_dead_process(names)
+
+        def tail(i: int) -> str:
+            return errs[i].read_text(errors="replace")[-2000:]
+
+        try:
+            for c, out, err in zip(commands, outs, errs):
+                with open(out, "w") as o, open(err, "w") as e:
+                    procs.append(subprocess.Popen(c, cwd=REPO, env=env, stdin=subprocess.DEVNULL,
+                                                  stdout=o, stderr=e, start_new_session=True))
+            deadline = time.monotonic() + RUN_TIMEOUT_S
+            result = result_at = None
+            while any(p.poll() is None for p in procs):
+                now = time.monotonic()
+                if result is None:
+                    line = next((l for l in outs[-1].read_text().splitlines()
+                                 if l.startswith("RING_RESULT ")), None)
+                    if line is not None:
+                        result, result_at = json.loads(line.split(" ", 1)[1]), now
+                if result is not None and now - result_at > TEARDOWN_GRACE_S:
+                    hung = [p for p in procs if p.poll() is None]
+                    for p in hung:
+                        kill(p)
+                    self.forced_ring_exits += len(hung)
+                    print(f"  (ring: {len(hung)} process(es) hung at teardown after the "
+                          f"result; killed)", file=sys.stderr, flush=True)
+                    return result
+                if now > deadline:
+                    raise RuntimeError(f"ring timed out ({' '.join(commands[-1][-8:])}):\n"
+                                       + "\n".join(tail(i) for i in range(len(procs))))
+                time.sleep(0.05)
+        except BaseException:
+            for p in procs:
+                if p.poll() is None:
+                    kill(p)
+            raise
+        failed = [f"{' '.join(c[-8:])}: exit {p.returncode}\n{tail(i)}"
+                  for i, (p, c) in enumerate(zip(procs, commands)) if p.returncode != 0]
+        if failed or result is None:
+            line = next((l for l in outs[-1].read_text().splitlines()
+                         if l.startswith("RING_RESULT ")), None)
+            if failed or line is None:
+                raise RuntimeError("ring failed:\n" + ("\n".join(failed) or tail(-1)))
+            result = json.loads(line.split(" ", 1)[1])
+        return result
