@@ -20,8 +20,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
-import os
 import shlex
 import shutil
 import signal
@@ -38,20 +36,15 @@ from .core.checkpoint import Checkpoint, load_checkpoint
 from .core.params import STATE_NAMES, ParamError, Params
 from .core.presets import PRESETS
 from .files import cannot_create
-from .graph.names import GRAPH_NODES, NOT_STARTED, RECORDER, TRIAL_MANAGER, namespace_problem
-from .graph.run import (DEMO, ENVIRONMENTS, OWN_TAU, RUN_SETTINGS, default_bag_path,
-                        node_arguments, run_values, write_params)
+from .graph.names import NOT_STARTED, RECORDER, TRIAL_MANAGER, namespace_problem
+from .graph.run import DEMO, ENVIRONMENTS, OWN_TAU, RUN_SETTINGS, default_bag_path, run_values
 from .init_weights import OPTIMAL, episode_start
-from .process_signals import EXIT_WITH_STDIN, catch_signals
-from .supervise import Supervisor, say
+from .process_signals import catch_signals
+from .supervise import (NODES, Supervisor, fresh_summary, report_failure, run_separate, say,
+                        start_recorder, stop_recorder)
 
-NODES = (*GRAPH_NODES, TRIAL_MANAGER)
 # --env-node: a command starting with one of these runs with run_all's interpreter (its venv).
 PYTHON_NAMES = ("python", "python3")
-# After the episode ends or Ctrl-C, how long the nodes get to exit by themselves, and then the
-# recorder to finish the bag (it may lag on a loaded machine): then they are terminated.
-SHUTDOWN_GRACE_S = 10.0
-RECORDER_GRACE_S = 30.0
 
 
 def parse_args(argv):
@@ -199,109 +192,6 @@ def checkpoint_values(checkpoint: Checkpoint) -> dict:
     values = {k: v for k, v in checkpoint.params.to_dict().items() if v != defaults[k]}
     return {**values, "seed": checkpoint.seed, "trials": checkpoint.params.trials,
             "nsv": checkpoint.params.nsv}
-
-
-def child_environment() -> dict:
-    return {**os.environ, EXIT_WITH_STDIN: "1"}
-
-
-def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
-                 env_command: list[str] | None, namespace: str,
-                 interrupted: list[int], began: float) -> tuple[int, bool]:
-    """Start the nodes (env_command None: no environment) and watch them until the trial
-    manager ends. Returns (its exit status, or 128 + signal; whether run_all saw a process fail
-    itself, and said so: one that exited with an error or a signal)."""
-    arguments = node_arguments(write_params(workdir / "params.yaml", values), namespace)
-    for name in NODES:
-        command = env_command if name == "environment" else \
-            [sys.executable, "-m", f"clnn_ros.nodes.{name}"]
-        if command is not None:
-            supervisor.start(name, [*command, *arguments], child_environment())
-    manager = supervisor.children[TRIAL_MANAGER]
-    failure, ended_at, outcome, status = None, None, None, None
-    while manager.returncode is None and not interrupted:
-        if failure := supervisor.first_failure(exclude={TRIAL_MANAGER}):
-            break
-        if ended_at is None and (outcome := fresh_summary(Path(values["out_dir"]), began)):
-            ended_at = time.monotonic()  # the episode is over and its results written
-        if ended_at is not None and time.monotonic() - ended_at > SHUTDOWN_GRACE_S:
-            # Its DDS participant hangs in deletion (seen once: Fast DDS 2.14's
-            # DomainParticipant::set_listener spins while a discovery callback waits for a lock
-            # it holds, with the GIL held, so no signal handler runs): nothing is lost by
-            # ending it now.
-            warn_forced(supervisor.stop([TRIAL_MANAGER], 0.0, interrupt=False))
-            status = 0 if outcome.get("exit_reason") == "completed" else 1
-            break
-        time.sleep(0.02)
-    if status is None and manager.returncode is not None and manager.returncode < 0:
-        failure = manager  # stopped from outside: it sent no EPISODE_END
-        supervisor.release(manager)
-    # Ctrl-C reaches every process of the terminal's group: run_all's own handler has run long
-    # before a child handled it and exited.
-    if failure is not None and not interrupted:
-        report_failure(failure)
-    nodes = [n for n in NODES if n in supervisor.children]
-    # After a normal end every node has its EPISODE_END; after a failure a node that was still
-    # starting may have missed it: they are told with SIGINT. One still importing on a loaded
-    # machine may take longer than the grace to get there: after a failure, its termination is
-    # part of ending the run, not a node that missed its end.
-    forced = supervisor.stop(nodes, SHUTDOWN_GRACE_S,
-                             interrupt=bool(interrupted or failure or status or manager.returncode))
-    warn_forced([(name, how) for name, how in forced
-                 if how != "terminated" or failure is None])
-    status = manager.returncode if status is None else status
-    if interrupted:
-        return 128 + interrupted[0], False
-    return status, failure is not None
-
-
-def report_failure(child) -> None:
-    """The one error line, at once, then the last lines of the child's stderr."""
-    say(f"run_all: error: {child.describe_exit()}")
-    for line in child.last_lines():
-        say(f"  {child.name}| {line}")
-
-
-def warn_forced(forced: list[tuple[str, str]]) -> None:
-    """One line for each child that Supervisor.stop had to stop."""
-    for name, how in forced:
-        if how == "terminated":
-            say(f"run_all: warning: node {name} did not exit in time; terminated")
-        else:
-            say(f"run_all: warning: node {name} did not exit in time, nor on SIGTERM (hung in "
-                f"native code: seen in Fast DDS's participant deletion, docs/ROS_GRAPH.md); "
-                f"killed")
-
-
-def start_recorder(supervisor: Supervisor, values: dict, bag_path: Path, workdir: Path,
-                   namespace: str, environment: str) -> None:
-    """The recorder: its own process, also in composed mode; OSError if the bag's directory
-    cannot be created. `environment`: what runs as the environment node, kept in the bag."""
-    bag_path.mkdir(parents=True, exist_ok=True)
-    params_file = write_params(workdir / "recorder_params.yaml", {
-        **values, "bag_path": str(bag_path), "environment": environment})
-    supervisor.start(RECORDER, [sys.executable, "-m", "clnn_ros.nodes.recorder",
-                                *node_arguments(params_file, namespace)], child_environment())
-
-
-def stop_recorder(supervisor: Supervisor, episode_ended: bool) -> bool:
-    """After the nodes: the recorder ends by itself after EPISODE_END; otherwise (Ctrl-C, the
-    trial manager stopped from outside) it is told to finish the bag now. Returns whether it
-    had to be terminated."""
-    forced = supervisor.stop([RECORDER], RECORDER_GRACE_S, interrupt=not episode_ended)
-    warn_forced(forced)
-    return bool(forced)
-
-
-def fresh_summary(out: Path, since: float) -> dict:
-    """The trial manager's summary.json of this run ({} if it wrote none)."""
-    path = out / "summary.json"
-    try:
-        if path.stat().st_mtime >= since:
-            return json.loads(path.read_text())
-    except (OSError, ValueError):
-        pass
-    return {}
 
 
 def main(argv=None) -> int:

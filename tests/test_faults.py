@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from clnn_ros import names
+from clnn_ros.graph import names
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
 from clnn_ros.rosenv import (fast_dds_shm_files, own_fast_dds_files,

@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from clnn_ros import bag, names
+from clnn_ros import bag
+from clnn_ros.graph import names
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
 from clnn_ros.graph.names import STATE
