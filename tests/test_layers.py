@@ -62,3 +62,52 @@ def test_console_scripts_name_a_main():
     for command, target in scripts.items():
         module, function = target.split(":")
         assert callable(getattr(importlib.import_module(module), function)), command
+
+
+def imported_modules(path: Path, package: str) -> set[str]:
+    """The absolute names of the project modules `path` (a module of `package`) imports."""
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
+                found.add(f"{base}.{node.module}" if node.module else base)
+                found.update(f"{base}.{alias.name}" for alias in node.names if not node.module)
+            else:
+                found.add(node.module or "")
+        elif isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+    return {name for name in found if name.startswith("clnn_ros")}
+
+
+def test_the_contract_room_imports_no_ros():
+    """clnn_ros.graph is what every caller agrees on: offline tools read it without rclpy."""
+    modules = [f"clnn_ros.graph.{p.stem}" for p in (ROOT / "clnn_ros" / "graph").glob("*.py")]
+    check = (f"import sys, {', '.join(modules)}; "
+             "print(sorted(m for m in sys.modules if m.split('.')[0] in "
+             "('rclpy', 'clnn_ros_msgs', 'numba')))")
+    loaded = subprocess.run([sys.executable, "-c", check], capture_output=True, text=True,
+                            check=True).stdout.strip()
+    assert loaded == "[]"
+
+
+def test_run_all_loads_no_ros_and_no_node_in_process_mode():
+    check = ("import sys, clnn_ros.run_all; print('rclpy' in sys.modules, "
+             "sorted(m for m in sys.modules if m.startswith('clnn_ros.nodes')))")
+    loaded = subprocess.run([sys.executable, "-c", check], capture_output=True, text=True,
+                            check=True).stdout.strip()
+    assert loaded == "False []"
+
+
+def test_no_node_module_imports_another():
+    """Each node reads alone: what nodes share is the glue module (and clnn_ros.graph)."""
+    nodes = ROOT / "clnn_ros" / "nodes"
+    for path in sorted(nodes.glob("*.py")):
+        others = {f"clnn_ros.nodes.{p.stem}" for p in nodes.glob("*.py")} - \
+            {f"clnn_ros.nodes.{path.stem}", "clnn_ros.nodes.glue", "clnn_ros.nodes.__init__"}
+        assert not imported_modules(path, "clnn_ros.nodes") & others, path.name
+
+
+def test_no_project_file_is_past_400_lines():
+    for path in sorted((ROOT / "clnn_ros").rglob("*.py")):
+        assert len(path.read_text().splitlines()) <= 400, path.relative_to(ROOT)
