@@ -256,7 +256,7 @@ one `mj_step` with timestep 0.02 s and MuJoCo's `Euler` integrator, which is sem
 the discrete-time model the core, the batch engine and the paper step, with MuJoCo's rigid-body
 algorithms in place of the closed-form equations. The failure limits (12 deg, then 2.4 m) are
 checked after each step, as in the core. `clnn-run --env mujoco` runs it as the environment
-node (`clnn_ros/nodes/mujoco_env.py`), and a node run equals
+node's simulator (`clnn_ros/nodes/environment.py`, `simulator:=mujoco`), and a node run equals
 `run_episode(seed, p, env_factory=MujocoCartPole)` trial by trial (tests/test_mujoco_env.py).
 MuJoCo alone takes {microseconds:.1f} us a step here (the agent, in pure Python, takes some
 {1e6 * process_s / total_steps:.0f} us).
