@@ -23,21 +23,18 @@ def ring_messages(kind: str) -> dict:
     from clnn_ros_msgs.msg import Action, CartPoleState, Reward, SpikeVector
     from rosgraph_msgs.msg import Clock
 
-    labels = ["pole_angle[-12,-6)deg", "pole_angle[-6,-1)deg", "pole_angle[-1,0)deg",
-              "pole_angle[0,1)deg", "pole_angle[1,6)deg", "pole_angle[6,12]deg"]
     return {
         "clock": Clock(),
         "state": CartPoleState(cart_position_m=0.01, cart_velocity_m_per_s=0.1,
                                pole_angle_deg=-0.5, pole_angular_velocity_deg_per_s=3.0,
                                successful_steps=100),
-        "spikes": SpikeVector(spikes=[0, 0, 1, 0, 0, 0], input_labels=labels,
-                              spiking_inputs=[2]),
+        "spikes": SpikeVector(spikes=[0, 0, 1, 0, 0, 0]),
         "reward": Reward(reward_one_hot=[0, 0], kind="none", success_counter=100),
         "action": Action(force_direction=1, force_n=10.0, winning_neuron=1, winning_segment=3),
     }
 
 
-def ring_node(role: str, kind: str, ticks: int, context=None):
+def ring_node(role: str, kind: str, ticks: int):
     import rclpy.node
     from rclpy.task import Future
 
@@ -49,7 +46,7 @@ def ring_node(role: str, kind: str, ticks: int, context=None):
 
     class RingNode(rclpy.node.Node):
         def __init__(self):
-            super().__init__(f"ring_{role}", context=context)
+            super().__init__(f"ring_{role}")
             self.msg = messages[out_topic]
             self.uint64 = kind == "uint64"
             self.is_clock = out_topic == "clock"
