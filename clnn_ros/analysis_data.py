@@ -12,8 +12,8 @@ import numpy as np
 from .bag import Decoder, iter_raw, mcap_file, open_bag
 from .core.params import ParamError, Params, params_from_strings
 from .graph.fields import END, REACHED_MAX_STEPS, START, tick_nanoseconds
-from .graph.names import (ACTION, PER_TICK, REWARD, SPIKES, STATE, TOPIC_TYPES, TRIAL_EVENT,
-                          WEIGHTS)
+from .graph.names import (ACTION, INPUT_LABELS, PER_TICK, REWARD, SPIKES, STATE, TOPIC_TYPES,
+                          TRIAL_EVENT, WEIGHTS)
 from .graph.run import RUN_SETTINGS
 
 REINFORCEMENT = {"reward": 1, "punish": -1}  # Reward.kind; "none" is 0
@@ -66,7 +66,7 @@ def read_bag(path: Path, salvage: bool):
         params, given = run_parameters(record)
         tau_ns = tick_nanoseconds(params.tau)
         decode = Decoder()
-        events, weights = [], []
+        events, weights, labels = [], [], None
         ticks = {topic: [] for topic in PER_TICK}
         raw = {STATE: {}, SPIKES: {}, REWARD: {}, ACTION: {}}
         schemas = {}
@@ -79,6 +79,8 @@ def read_bag(path: Path, salvage: bool):
                 events.append(decode(schema, data))
             elif topic == WEIGHTS:
                 weights.append(decode(schema, data))
+            elif topic == INPUT_LABELS:
+                labels = list(decode(schema, data).labels)
             elif topic in ticks:
                 tick = sim_ns // tau_ns
                 ticks[topic].append(tick)
@@ -87,7 +89,7 @@ def read_bag(path: Path, salvage: bool):
                     schemas[topic] = schema
     return dict(params=params, given=given, record=record, events=events, weights=weights,
                 ticks=ticks, raw=raw, schemas=schemas, counts=counts, decode=decode,
-                recorded_as=recorded_as)
+                recorded_as=recorded_as, labels=labels)
 
 
 def trial_rows(events) -> list[list]:
@@ -110,13 +112,15 @@ def trial_window(events, trial: int) -> tuple[int, int | None]:
 
 
 def input_labels(data, inputs: int | None = None) -> list[str]:
-    """The encoder's interval labels as the bag's first spike vector carries them; input numbers
-    where the bag holds none, or where they are not `inputs` labels."""
-    spikes = data["raw"][SPIKES]
-    if spikes:
-        labels = list(data["decode"](data["schemas"][SPIKES], spikes[min(spikes)]).input_labels)
-        if inputs is None or len(labels) == inputs:
-            return labels
+    """The encoder's interval labels as the bag holds them: on rln/input_labels, or in a bag of
+    an earlier version in each spike vector; input numbers where the bag holds none, or where
+    they are not `inputs` labels."""
+    labels, spikes = data["labels"], data["raw"][SPIKES]
+    if labels is None and spikes:
+        first = data["decode"](data["schemas"][SPIKES], spikes[min(spikes)])
+        labels = list(getattr(first, "input_labels", None) or []) or None
+    if labels is not None and (inputs is None or len(labels) == inputs):
+        return labels
     return [f"input {i}" for i in range(inputs or data["params"].n_inputs)]
 
 

@@ -29,7 +29,7 @@ import yaml
 from .bag import message_class
 from .cli import OneLineArgumentParser
 from .graph import qos
-from .graph.names import TOPIC_TYPES, absolute, graph_topic
+from .graph.names import INPUT_LABELS, SPIKES, TOPIC_TYPES, absolute, graph_topic
 
 
 class EchoError(Exception):
@@ -82,15 +82,19 @@ def get_field(msg, path: str):
 
 
 class Raster:
-    """/rln/spikes as one text row per tick; the input labels as a header once."""
+    """/rln/spikes as one text row per tick; the input labels (rln/input_labels, latched) as a
+    header, again whenever they change (input numbers until they are known)."""
 
     def __init__(self, out):
-        self.out, self.labels = out, None
+        self.out, self.labels, self.shown = out, None, None
+
+    def set_labels(self, msg) -> None:
+        self.labels = list(msg.labels)
 
     def __call__(self, msg) -> None:
-        labels = list(msg.input_labels)
-        if labels != self.labels:
-            self.labels = labels
+        labels = self.labels or [f"input {i}" for i in range(len(msg.spikes))]
+        if labels != self.shown:
+            self.shown = labels
             self.out.write("# one row per tick: '#' = the input spiked, '.' = it did not\n")
             for i, label in enumerate(labels):
                 self.out.write(f"#   {i:2d} {label}\n")
@@ -151,7 +155,7 @@ def main(argv=None) -> int:
         try:
             type_name = topic_type(node, args.topic, args.wait)
             cls = message_class(type_name)
-            if args.raster and not hasattr(cls(), "input_labels"):
+            if args.raster and type_name != TOPIC_TYPES[SPIKES]:
                 raise EchoError(f"--raster needs a SpikeVector topic such as /rln/spikes, not "
                                 f"{args.topic} ({type_name})")
             if args.field:
@@ -171,7 +175,14 @@ def main(argv=None) -> int:
                 sys.stdout.flush()
                 printed.append(1)
 
-            node.create_subscription(cls, args.topic, show, qos_profile(qos.ECHO))
+            resolved = node.resolve_topic_name(args.topic)
+            latched = graph_topic(resolved) == INPUT_LABELS  # published once: ask for the last
+            node.create_subscription(cls, args.topic, show,
+                                     qos_profile(qos.LABELS if latched else qos.ECHO))
+            if raster is not None and graph_topic(resolved) == SPIKES:
+                node.create_subscription(message_class(TOPIC_TYPES[INPUT_LABELS]),
+                                         resolved.removesuffix(SPIKES) + INPUT_LABELS,
+                                         raster.set_labels, qos_profile(qos.LABELS))
             while not received and not (args.once and printed):
                 rclpy.spin_once(node, timeout_sec=0.1)
             return 128 + received[0] if received else 0

@@ -163,7 +163,7 @@ class MessageMaker:
                 spikes[rng.choice([i for i in range(n) if not spikes[i]])] = 1
             else:
                 spikes[spikes.index(1)] = rng.randint(2, 255)
-        return SpikeVector(spikes=spikes, spiking_inputs=[i for i, s in enumerate(spikes) if s])
+        return SpikeVector(spikes=spikes)
 
     def _Reward(self, _tick: int, category: str) -> Reward:
         rng = self.rng

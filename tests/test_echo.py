@@ -13,15 +13,14 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Byte, Empty, UInt8MultiArray
 
 from clnn_ros.echo import to_csv, to_yaml
-from clnn_ros_msgs.msg import CartPoleState, SpikeVector
+from clnn_ros_msgs.msg import CartPoleState, InputLabels, SpikeVector
 
 from test_graph import wait_for_line
 
 from conftest import free_domain_id, ros_environment
 
 PROBE = Path(__file__).with_name("probe_participant.py")
-SPIKES_FIELDS = "{header: {stamp: {sec: 3, nanosec: 5}}, tick: 7, trial: 1, spikes: [0, 1, 0], " \
-                "input_labels: ['pole_angle[-1,0)deg', 'b: c', x], spiking_inputs: [1]}"
+SPIKES_FIELDS = "{header: {stamp: {sec: 3, nanosec: 5}}, tick: 7, trial: 1, spikes: [0, 1, 0]}"
 SPIKES_BLOCK = """\
 header:
   stamp:
@@ -34,21 +33,15 @@ spikes:
 - 0
 - 1
 - 0
-input_labels:
-- pole_angle[-1,0)deg
-- 'b: c'
-- x
-spiking_inputs:
-- 1
 """
 SPIKES_FLOW = "{header: {stamp: {sec: 3, nanosec: 5}, frame_id: ''}, tick: 7, trial: 1, spikes: " \
-              "[0, 1, 0], input_labels: ['pole_angle[-1,0)deg', 'b: c', x], spiking_inputs: [1]}\n"
-SPIKES_CSV = "3,5,,7,1,0,1,0,pole_angle[-1,0)deg,b: c,x,1"
+              "[0, 1, 0]}\n"
+SPIKES_CSV = "3,5,,7,1,0,1,0"
+LABELS = InputLabels(labels=["pole_angle[-1,0)deg", "b: c", "x"])
 
 
 def spikes() -> SpikeVector:
-    msg = SpikeVector(tick=7, trial=1, spikes=[0, 1, 0], spiking_inputs=[1],
-                      input_labels=["pole_angle[-1,0)deg", "b: c", "x"])
+    msg = SpikeVector(tick=7, trial=1, spikes=[0, 1, 0])
     msg.header.stamp.sec, msg.header.stamp.nanosec = 3, 5
     return msg
 
@@ -57,6 +50,8 @@ def test_a_message_in_block_flow_and_csv_style():
     assert to_yaml(spikes()) == SPIKES_BLOCK
     assert to_yaml(spikes(), flow_style=True) == SPIKES_FLOW
     assert to_csv(spikes()) == SPIKES_CSV
+    assert to_yaml(LABELS) == "labels:\n- pole_angle[-1,0)deg\n- 'b: c'\n- x\n"
+    assert to_yaml(LABELS, flow_style=True) == "{labels: ['pole_angle[-1,0)deg', 'b: c', x]}\n"
 
 
 def test_a_message_without_fields_is_braces_in_yaml_and_an_empty_csv_line():

@@ -26,6 +26,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from clnn_ros_msgs.msg import (
     Action,
     CartPoleState,
+    InputLabels,
     Reward,
     SpikeVector,
     TrialEvent,
@@ -77,15 +78,11 @@ def stamp(tick: int, tau: float = 0.02) -> Time:
 def sample_messages() -> list:
     """One message of each type with every field set to a non-default value."""
     tick, trial = 12345678901, 7
-    labels = ["pole_angle[-inf,-6)deg", "pole_angle[-6,-1)deg", "pole_angle[-1,0)deg",
-              "pole_angle[0,1)deg", "pole_angle[1,6)deg", "pole_angle[6,inf)deg",
-              "cart_velocity[-inf,-5)m/s", "cart_velocity[-5,5)m/s", "cart_velocity[5,inf)m/s"]
     msgs = [
         CartPoleState(tick=tick, trial=trial, cart_position_m=-0.25, cart_velocity_m_per_s=0.5,
                       pole_angle_deg=-12.5, pole_angular_velocity_deg_per_s=3.75, failed=True,
                       failure_reason=CartPoleState.FAILURE_POLE_ANGLE, successful_steps=9999),
-        SpikeVector(tick=tick, trial=trial, spikes=[0, 0, 1, 0, 0, 0, 0, 1, 0], input_labels=labels,
-                    spiking_inputs=[2, 7]),
+        SpikeVector(tick=tick, trial=trial, spikes=[0, 0, 1, 0, 0, 0, 0, 1, 0]),
         Action(tick=tick, trial=trial, force_direction=Action.FORCE_NEGATIVE, force_n=-10.0,
                winning_neuron=Action.NEURON_NEGATIVE_FORCE, winning_segment=5),
         Reward(tick=tick, trial=trial, reward_one_hot=[0, 1], kind=Reward.KIND_PUNISH, success_counter=42),
@@ -120,8 +117,7 @@ def test_definitions():
         CartPoleState: {"cart_position_m": "double", "cart_velocity_m_per_s": "double",
                         "pole_angle_deg": "double", "pole_angular_velocity_deg_per_s": "double",
                         "failed": "boolean", "failure_reason": "string", "successful_steps": "uint32"},
-        SpikeVector: {"spikes": "sequence<uint8>", "input_labels": "sequence<string>",
-                      "spiking_inputs": "sequence<uint16>"},
+        SpikeVector: {"spikes": "sequence<uint8>"},
         Action: {"force_direction": "int8", "force_n": "double", "winning_neuron": "uint8",
                  "winning_segment": "uint8"},
         Reward: {"reward_one_hot": "uint8[2]", "kind": "string", "success_counter": "uint32",
@@ -133,6 +129,8 @@ def test_definitions():
     }
     for cls, fields in expected.items():
         assert cls.get_fields_and_field_types() == {**common, **fields}, cls.__name__
+    # once per run, not per tick: no header, tick or trial
+    assert InputLabels.get_fields_and_field_types() == {"labels": "sequence<string>"}
     assert (TrialEvent.START, TrialEvent.END, TrialEvent.EPISODE_END) == (0, 1, 2) == \
         (message_fields.START, message_fields.END, message_fields.EPISODE_END)
     assert (Action.FORCE_NEGATIVE, Action.FORCE_POSITIVE) == (-1, 1)
@@ -211,8 +209,7 @@ PUBLISHER = textwrap.dedent("""
     end = time.monotonic() + 20
     while pub.get_subscription_count() < 1 and time.monotonic() < end:
         time.sleep(0.02)
-    m = SpikeVector(tick=3, trial=1, spikes=[0, 1, 0, 0, 0, 0], spiking_inputs=[1],
-                    input_labels=[f"in{k}" for k in range(6)])
+    m = SpikeVector(tick=3, trial=1, spikes=[0, 1, 0, 0, 0, 0])
     m.header.stamp.nanosec = 60_000_000
     pub.publish(m)
     time.sleep(1.0)  # let RELIABLE delivery finish before the writer goes away
@@ -236,8 +233,7 @@ def test_pub_sub_across_processes(context):
         assert ok, f"nothing received; publisher said:\n{out}"
         assert proc.returncode == 0, out
         m = got[0]
-        assert (m.tick, m.trial, list(m.spikes), list(m.spiking_inputs)) == (3, 1, [0, 1, 0, 0, 0, 0], [1])
-        assert list(m.input_labels) == [f"in{k}" for k in range(6)]
+        assert (m.tick, m.trial, list(m.spikes)) == (3, 1, [0, 1, 0, 0, 0, 0])
         assert (m.header.stamp.sec, m.header.stamp.nanosec) == (0, 60_000_000)
     finally:
         if proc.poll() is None:

@@ -13,6 +13,8 @@ SPIKES = "rln/spikes"
 REWARD = "rln/reward"
 ACTION = "rln/action"
 WEIGHTS = "rln/weights"
+# What each encoder input means: once per run, latched (the spike vectors carry no text).
+INPUT_LABELS = "rln/input_labels"
 # Every topic of the graph and its type, in causal order within a tick.
 TOPIC_TYPES = {
     CLOCK: "rosgraph_msgs/msg/Clock",
@@ -23,6 +25,7 @@ TOPIC_TYPES = {
     REWARD: "clnn_ros_msgs/msg/Reward",
     ACTION: "clnn_ros_msgs/msg/Action",
     WEIGHTS: "clnn_ros_msgs/msg/WeightSnapshot",
+    INPUT_LABELS: "clnn_ros_msgs/msg/InputLabels",
 }
 PER_TICK = (CLOCK, STATE, SPIKES, REWARD, ACTION)  # one message per tick
 # Topics an environment of one's own may leave out (docs/ENV_CONTRACT.md): only viewers read them.
@@ -43,7 +46,8 @@ RECORDER = "recorder"
 NOT_STARTED = 3
 # Who publishes what within a tick, in causal order.
 PUBLISHED_BY = {CLOCK: TRIAL_MANAGER, TRIAL_EVENT: TRIAL_MANAGER, STATE: "environment",
-                SPIKES: "encoder", REWARD: "reward", ACTION: "agent", WEIGHTS: "agent"}
+                SPIKES: "encoder", REWARD: "reward", ACTION: "agent", WEIGHTS: "agent",
+                INPUT_LABELS: "encoder"}
 
 
 def absolute(topic: str, namespace: str = "/") -> str:

@@ -28,6 +28,8 @@ PROGRESS = Qos(depth=1)
 # A readiness announcement must reach a trial manager that starts later than the node; the
 # depth keeps every node's announcement when several arrive at once.
 READY = Qos(depth=16, durability="transient_local")
+# The input labels: published once, kept for whoever subscribes later (echo --raster).
+LABELS = Qos(depth=1, durability="transient_local")
 # The recorder's subscriptions: deep enough that the DDS receive thread never drops a message
 # while Python is busy, so the recorder may lag behind the lockstep graph without loss.
 RECORD = Qos(depth=100_000)

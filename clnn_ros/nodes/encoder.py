@@ -3,20 +3,21 @@
     python -m clnn_ros.nodes.encoder --ros-args -p nsv:=2 -p velocity_edge:=0.5
 
 Subscribes cartpole/state(t); publishes rln/spikes(t), the 1-hot code of each encoded state
-variable. Ends on trial/event EPISODE_END.
+variable, and once, latched, rln/input_labels: what each input means. Ends on trial/event
+EPISODE_END.
 """
 
 from __future__ import annotations
 
-from clnn_ros_msgs.msg import CartPoleState, SpikeVector, TrialEvent
+from clnn_ros_msgs.msg import CartPoleState, InputLabels, SpikeVector, TrialEvent
 from rclpy.node import Node
 from rclpy.task import Future
 
 from ..core.encoder import Encoder
 from ..graph.fields import tick_nanoseconds
 from ..graph.lockstep import Refusals, TickJoin
-from ..graph.names import SPIKES, STATE, TRIAL_EVENT
-from .glue import (LOCKSTEP_QOS, Readiness, checked, declare_run_parameters,
+from ..graph.names import INPUT_LABELS, SPIKES, STATE, TRIAL_EVENT
+from .glue import (LABELS_QOS, LOCKSTEP_QOS, Readiness, checked, declare_run_parameters,
                    endpoints_matched, ends_with_the_episode, run_node, stamp, use_sim_time)
 
 
@@ -30,9 +31,10 @@ class EncoderNode(Node):
         self.finished, self.failure = Future(), None
         self.refusals = Refusals(self.get_logger().error)
         self.join = TickJoin((STATE,), self.on_tick, self.refusals)
-        # One message object, refilled each tick (publish serializes it at once); labels fixed.
-        self.spikes_msg = SpikeVector(input_labels=self.encoder.labels())
+        self.spikes_msg = SpikeVector()  # one message object, refilled each tick
         self.spikes_pub = self.create_publisher(SpikeVector, SPIKES, LOCKSTEP_QOS)
+        self.create_publisher(InputLabels, INPUT_LABELS, LABELS_QOS).publish(
+            InputLabels(labels=self.encoder.labels()))
         state_sub = self.create_subscription(
             CartPoleState, STATE,
             checked(STATE, self.params, self.refusals, lambda msg: self.join.offer(STATE, msg)),
@@ -51,7 +53,7 @@ class EncoderNode(Node):
         spikes = self.encoder.spikes((msg.cart_position_m, msg.cart_velocity_m_per_s,
                                       msg.pole_angle_deg, msg.pole_angular_velocity_deg_per_s))
         out = self.spikes_msg
-        out.spikes, out.spiking_inputs = spikes.tolist(), spikes.nonzero()[0].tolist()
+        out.spikes = spikes.tobytes()
         self.spikes_pub.publish(stamp(out, msg.tick, msg.trial, self.tau_ns))
 
 

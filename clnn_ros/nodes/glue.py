@@ -30,6 +30,7 @@ from ..rclpy_session import qos_profile, ros_session, spin_until_finished, split
 LOCKSTEP_QOS = qos_profile(qos.LOCKSTEP)
 READY_QOS = qos_profile(qos.READY)
 PROGRESS_QOS = qos_profile(qos.PROGRESS)
+LABELS_QOS = qos_profile(qos.LABELS)
 ACK_WAIT_S = 2.0  # a node's last messages reach the recorder before the node exits (or this)
 
 

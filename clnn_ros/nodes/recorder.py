@@ -41,10 +41,11 @@ from .. import bag
 from ..core.params import ParamError, Params
 from ..files import describe_write_error
 from ..graph import qos
-from ..graph.names import CLOCK, OPTIONAL, PER_TICK, RECORDED, RECORDER, TOPIC_TYPES, TRIAL_EVENT
+from ..graph.names import (CLOCK, INPUT_LABELS, OPTIONAL, PER_TICK, RECORDED, RECORDER,
+                           TOPIC_TYPES, TRIAL_EVENT)
 from ..graph.fields import tick_nanoseconds
 from ..rclpy_session import WithMessageInfo, qos_profile, ros_session, spin_until_finished
-from .glue import PROGRESS_QOS, Readiness, declare_run_parameters, given_parameters, steady_clock
+from .glue import LABELS_QOS, PROGRESS_QOS, Readiness, declare_run_parameters, given_parameters, steady_clock
 
 RECORD_QOS = qos_profile(qos.RECORD)
 LINGER_S = 0.3      # after EPISODE_END: wait for messages still in flight on other topics
@@ -81,7 +82,8 @@ class RecorderNode(Node):
         self.tau_ns = tick_nanoseconds(params.tau)
         for topic, type_name in TOPIC_TYPES.items():
             self.subscriptions_by_topic[topic] = self.create_subscription(
-                bag.message_class(type_name), topic, self._receiver(topic), RECORD_QOS, raw=True)
+                bag.message_class(type_name), topic, self._receiver(topic),
+                LABELS_QOS if topic == INPUT_LABELS else RECORD_QOS, raw=True)
         self.finished = Future()
         self.episode_end_at = None
         self.last_message_at = time.monotonic()
