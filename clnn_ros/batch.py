@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -153,10 +154,29 @@ class BatchResult:
     wall_s: float
 
 
+# Who runs the plain learning runs (each seed's own weights and angles) while `distributed` holds:
+# a function (seeds, p) -> BatchResult that hands their seeds to other processes, e.g. a Ray
+# cluster's (clnn_ros.reproduce.common.executed_by). Those processes run them here, unhanded.
+_distributor = None
+
+
+@contextmanager
+def distributed(distributor):
+    """Within: run_batch(seeds, p) is distributor(seeds, p); equal arrays, other processes."""
+    global _distributor
+    before, _distributor = _distributor, distributor
+    try:
+        yield
+    finally:
+        _distributor = before
+
+
 def run_batch(seeds, p: Params, weights: np.ndarray | None = None, angles: np.ndarray | None = None,
               learn: bool = True) -> BatchResult:
     """Run one episode per seed (the core's seed protocol), in parallel over seeds.
     `weights` (2, q, n) and `angles` (trials,) override every seed's own."""
+    if _distributor is not None and weights is None and angles is None and learn:
+        return _distributor(seeds, p)
     seeds = np.asarray(list(seeds), dtype=np.int64)
     setups = [seed_setup(int(s), p) for s in seeds]
     all_weights = np.stack([w if weights is None else np.asarray(weights, np.float64)

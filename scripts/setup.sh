@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Fresh-machine setup, idempotent: creates .venv (python3.11) in the repo root, installs the
-# project + pinned ROS 2 Jazzy wheels (requirements-ros.txt), and builds the interface package
+# project (with its test and cluster extras: the tests run a local Ray cluster) + pinned ROS 2
+# Jazzy wheels (requirements-ros.txt), and builds the interface package
 # msgs_spec/ (clnn_ros_msgs) into the venv with cmake. No ROS install or sourced ROS env needed;
 # nothing is exported outside this script. A second run only checks two stamp files.
 #   env: PYTHON (interpreter for a new venv, default python3.11)
@@ -62,12 +63,13 @@ mkdir -p "$LOGS"
 
 # --- 2. pip: project + pinned ROS wheels -----------------------------------------------------
 phase "pip install"
-pip_hash=$(hash_files "$ROOT/pyproject.toml" "$ROOT/requirements-ros.txt")
+EXTRAS="test,cluster"  # cluster: Ray, for clnn-reproduce --ray and tests/test_cluster.py
+pip_hash="$(hash_files "$ROOT/pyproject.toml" "$ROOT/requirements-ros.txt") extras=$EXTRAS"
 if [ -f "$PIP_STAMP" ] && [ "$(cat "$PIP_STAMP")" = "$pip_hash" ]; then
   done_ "up to date"
 else
   rm -f "$PIP_STAMP"
-  ( cd "$ROOT" && "$VENV/bin/python" -m pip install -e ".[test]" -r requirements-ros.txt ) \
+  ( cd "$ROOT" && "$VENV/bin/python" -m pip install -e ".[$EXTRAS]" -r requirements-ros.txt ) \
     > "$LOGS/pip.log" 2>&1 || fail "$LOGS/pip.log" "pip install failed"
   echo "$pip_hash" > "$PIP_STAMP"
   done_

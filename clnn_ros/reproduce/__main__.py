@@ -5,6 +5,7 @@ generated report docs/REPRODUCTION.md.
     python -m clnn_ros.reproduce learn --nsv 1 --seeds 0-31 --trials 512 --out DIR [--option key=value]
     python -m clnn_ros.reproduce learn --state-vars pole_angle,cart_position --seeds 0-3 --out DIR
     python -m clnn_ros.reproduce sweep --param sigma=128,256 [--param ...] --nsv 1 --seeds 0-3 --trials 64 --out DIR
+    python -m clnn_ros.reproduce sweep ... --ray [HEAD:PORT]    # the units on Ray (docs/CLUSTER.md)
     python -m clnn_ros.reproduce presets            # the named parameter sets for --preset NAME
     python -m clnn_ros.reproduce learn --preset gymnasium --seeds 0-31 --out DIR
     python -m clnn_ros.reproduce gym-eval DIR [--episodes 100]  # DIR's weights in gymnasium itself
@@ -14,7 +15,9 @@ generated report docs/REPRODUCTION.md.
 Every run uses the numba batch engine (clnn_ros.batch) except the traces of Figures 10, 11 and 15,
 which replay one trial of a learned episode with the pure core (clnn_ros.core.episode.run_trial,
 learning) from the weights the batch engine had at its start. Each experiment's settings stand at
-the top of its module.
+the top of its module. `learn`, `sweep` and `all` take --ray [ADDRESS]: their runs, cut into units
+(a configuration x a block of seeds), run on a Ray instance of this machine or an existing cluster
+(clnn_ros.reproduce.cluster), with results equal to the local run's bit for bit.
 """
 
 from __future__ import annotations
@@ -23,13 +26,15 @@ import argparse
 import os
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 from ..cli import OneLineArgumentParser
 from ..core.params import STATE_NAMES, ParamError, Params, params_from_strings
 from ..core.presets import PRESETS, overlay_values, preset_values
 from .calibration import calibrate, print_calibration, write_calibration
-from .common import DEFAULT_SEEDS, LITERAL_EDGE, TRIALS, parse_seeds, stuck
+from .cluster import ClusterError
+from .common import DEFAULT_SEEDS, LITERAL_EDGE, TRIALS, executed_by, parse_seeds, stuck
 from .figures import figures_markdown, make_figures
 from .gym_eval import RESET_STRIDE, gym_eval, load_learn_output, print_gym_eval, write_gym_eval
 from .gymnasium_physics import SELECT_SEEDS, gymnasium_markdown, gymnasium_study, write_gymnasium
@@ -49,6 +54,7 @@ from .report import claims_markdown, data_files_markdown, header_markdown, write
 
 PRESET_HELP = ("a named set of parameter values (" + ", ".join(PRESETS) + "; the command "
                "'presets' lists them) that the other flags and --options override")
+LOCAL_RAY = "local"  # --ray without an address: a Ray instance of this machine's own
 OWN_FLAGS = {"nsv": "--nsv", "state_vars": "--state-vars", "trials": "--trials",
              "velocity_edge": "--velocity-edge",
              "physics": "--physics"}  # Params fields `learn` sets with a flag, not --option
@@ -82,6 +88,35 @@ def learn_params(args) -> Params:
     return params_from_strings(overlay_values(values, given))
 
 
+def add_cluster_flags(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--ray", nargs="?", const=LOCAL_RAY, metavar="ADDRESS",
+                        help="run the units (a configuration x a block of seeds) on Ray: without "
+                             "ADDRESS a Ray instance of this machine (on 127.0.0.1 only), with "
+                             "one the cluster whose head is at ADDRESS (HOST:PORT of its ray "
+                             "start --head); needs pip install -e '.[cluster]'; docs/CLUSTER.md")
+    parser.add_argument("--workers", type=int, metavar="N",
+                        help="with --ray: worker processes (default: one per CPU of the local "
+                             "machine, or of the cluster)")
+
+
+@contextmanager
+def executor(args):
+    """Within: the units run where the command's --ray says (here without it)."""
+    if args.workers is not None and (args.ray is None or args.workers < 1):
+        raise ValueError("--workers N goes with --ray, N at least 1")
+    if args.ray is None:
+        yield
+        return
+    from .cluster import RayExecutor
+    with RayExecutor(None if args.ray == LOCAL_RAY else args.ray, args.workers) as ray_executor, \
+            executed_by(ray_executor):
+        yield
+
+
+def log(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
 def cmd_calibrate(args) -> None:
     cal = calibrate()
     files = write_calibration(cal, Path(args.out))
@@ -92,7 +127,8 @@ def cmd_calibrate(args) -> None:
 def cmd_learn(args) -> None:
     seeds = parse_seeds(args.seeds)
     p = learn_params(args)
-    run = learn_run(f"{p.nsv}sv", f"{p.nsv} SV", seeds, p)
+    with executor(args):
+        run = learn_run(f"{p.nsv}sv", f"{p.nsv} SV", seeds, p, Path(args.out) / "runs", log)
     files = write_learn_outputs(run, Path(args.out))
     print_seed_means(run)
     print("wrote " + ", ".join(str(f) for f in files))
@@ -102,7 +138,9 @@ def cmd_sweep(args) -> None:
     seeds = parse_seeds(args.seeds)
     grid = parse_grid(args.param)
     check_sweep_names(grid)
-    runs = sweep(learn_params(args), grid, seeds, Path(args.out) / "runs")
+    base = learn_params(args)
+    with executor(args):
+        runs = sweep(base, grid, seeds, Path(args.out) / "runs", log)
     files = write_sweep(runs, Path(args.out))
     figure, summary = write_sweep_report(runs, args.seeds, Path(args.out))
     print(sweep_summary_markdown(runs))
@@ -132,6 +170,11 @@ def cmd_figures(args) -> None:
 
 
 def cmd_all(args) -> None:
+    with executor(args):
+        run_all(args)
+
+
+def run_all(args) -> None:
     start = time.perf_counter()
     seeds, option_seeds = parse_seeds(args.seeds), parse_seeds(args.ambiguity_seeds)
     out = Path(args.out)
@@ -216,7 +259,10 @@ def build_parser() -> argparse.ArgumentParser:
     ln.add_argument("--physics", default=None, help="paper (default) or correct")
     ln.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                     help="any other Params field, e.g. tie_break=index (repeatable)")
-    ln.add_argument("--out", default="out/learn", help="folder for learn_<n>sv.csv and weights")
+    ln.add_argument("--out", default="out/learn",
+                    help="folder for learn_<n>sv.csv and weights; finished units are kept in "
+                         "OUT/runs/ and not run again (an interrupted run resumes)")
+    add_cluster_flags(ln)
     ln.set_defaults(func=cmd_learn)
 
     sw = sub.add_parser("sweep", help="a grid of parameter values, CSV per configuration, a "
@@ -234,8 +280,9 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                     help="any other Params field, fixed for the whole grid")
     sw.add_argument("--out", default="out/sweep",
-                    help="folder for the CSV files, figure, summary; finished configurations are "
+                    help="folder for the CSV files, figure, summary; finished units are "
                          "kept in OUT/runs/ and not run again (an interrupted sweep resumes)")
+    add_cluster_flags(sw)
     sw.set_defaults(func=cmd_sweep)
 
     ps = sub.add_parser("presets", help="the named parameter sets that --preset NAME takes")
@@ -274,6 +321,7 @@ def build_parser() -> argparse.ArgumentParser:
     al.add_argument("--seeds", default=DEFAULT_SEEDS, help="seeds for the paper's runs")
     al.add_argument("--ambiguity-seeds", default=OPTION_SEEDS,
                     help="seeds for the one-option-at-a-time table")
+    add_cluster_flags(al)
     al.set_defaults(func=cmd_all)
     return parser
 
@@ -285,6 +333,9 @@ def main(argv: list[str] | None = None) -> int:
     except (ParamError, ValueError) as exc:
         print(f"python -m clnn_ros.reproduce {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except ClusterError as exc:
+        print(f"python -m clnn_ros.reproduce {args.command}: error: {exc}", file=sys.stderr)
+        return 1
     except BrokenPipeError:  # e.g. piped into `head`
         sys.stdout = open(os.devnull, "w")
         return 0

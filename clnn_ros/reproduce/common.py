@@ -9,12 +9,16 @@ import hashlib
 import json
 import os
 import sys
+import time
+from contextlib import contextmanager
 from pathlib import Path
 
+import numba
 import numpy as np
 from tqdm import tqdm
 
-from ..batch import run_batch
+from .. import batch
+from ..batch import BatchResult, run_batch
 from ..core.encoder import Encoder
 from ..core.episode import run_trial
 from ..core.params import Params
@@ -127,17 +131,37 @@ def trace_trial(weights: np.ndarray, angle_deg: float, p: Params, learn: bool = 
     return np.array(states), steps, status
 
 
+def load_stored(path: Path) -> dict | None:
+    """The arrays stored at `path`, or None when nothing is stored there."""
+    if not path.exists():
+        return None
+    with np.load(path) as data:
+        return dict(data)
+
+
+def store_arrays(path: Path, arrays: dict) -> None:
+    """Store a dict of arrays at `path` atomically: written whole to a file of this process's
+    own beside it, flushed to disk, then renamed over `path` (a reader sees all or nothing; an
+    interruption leaves nothing under `path`)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_name(f"{path.name}.{os.getpid()}.partial")
+    try:
+        with open(partial, "wb") as f:
+            np.savez_compressed(f, **arrays)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(partial, path)
+    finally:
+        partial.unlink(missing_ok=True)
+
+
 def stored(path: Path, compute) -> dict:
     """The arrays stored at `path`, or compute()'s (a dict of arrays) stored there first, written
     whole at once: an interrupted study or sweep resumes with what it finished."""
-    if path.exists():
-        with np.load(path) as data:
-            return dict(data)
-    arrays = compute()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    partial = path.with_name(path.name + ".partial.npz")
-    np.savez_compressed(partial, **arrays)
-    os.replace(partial, path)
+    arrays = load_stored(path)
+    if arrays is None:
+        arrays = compute()
+        store_arrays(path, arrays)
     return arrays
 
 
@@ -149,13 +173,130 @@ def store_path(store: Path, name: str, key) -> Path:
     return store / f"{safe}_{digest[:16]}.npz"
 
 
-def stored_batch(p: Params, seeds, store: Path, name: str) -> dict:
-    """The batch engine's episodes (steps, end_status, final_weights) for p and seeds, or those
-    stored for the same parameters and seeds by an earlier call."""
+# ------------------------------------------------------------------------------------------------
+# Units of work: one configuration x a block of seeds
+# ------------------------------------------------------------------------------------------------
+# A run of the batch engine (parameters, seeds) is cut into units of SEED_BLOCK seeds. Each seed's
+# episode depends on its seed and the parameters only, so a run's arrays are its units' arrays
+# one after another, whoever ran them and in whatever order. A unit is what a store keeps (one
+# file each: a finished unit is not run again) and what a cluster worker runs (8 seeds x 512
+# trials: a few seconds on one core). The store's file names depend on the block, so a stored
+# run resumes only with the same block.
+SEED_BLOCK = 8
+LOCAL_SEEDS = 32  # this machine runs at least this many seeds of one configuration in one call
+UNIT_ARRAYS = ("steps", "end_status", "final_weights", "initial_angles")
+
+
+def run_unit(p: Params, seeds) -> dict:
+    """A unit's arrays (UNIT_ARRAYS, one row per seed): the batch engine's run of p on seeds."""
+    r = run_batch(seeds, p)
+    return dict(steps=r.steps, end_status=r.end_status, final_weights=r.final_weights,
+                initial_angles=r.initial_angles)
+
+
+class LocalExecutor:
+    """Runs units in this process, several units of one configuration in one call of the batch
+    engine (its threads share the seeds), so that a small block costs no speed here."""
+
+    workers = 1
+    where = "this machine"
+
+    def run(self, units: list[tuple[Params, np.ndarray]]):
+        """(index in units, arrays) for each unit, as they finish."""
+        most = max(LOCAL_SEEDS, numba.get_num_threads())
+        k = 0
+        while k < len(units):
+            p, group = units[k][0], [k]
+            while (group[-1] + 1 < len(units) and units[group[-1] + 1][0] == p
+                   and sum(len(units[j][1]) for j in group) < most):
+                group.append(group[-1] + 1)
+            arrays = run_unit(p, np.concatenate([units[j][1] for j in group]))
+            start = 0
+            for j in group:
+                size = len(units[j][1])
+                yield j, {key: value[start:start + size] for key, value in arrays.items()}
+                start += size
+            k = group[-1] + 1
+
+
+_executor = LocalExecutor()
+
+
+@contextmanager
+def executed_by(executor):
+    """Within: every unit runs on `executor` (e.g. a Ray cluster), and so does every plain run of
+    the batch engine (run_batch(seeds, p)) that the experiments make themselves."""
+    global _executor
+    before = _executor
+    _executor = executor
+    try:
+        if isinstance(executor, LocalExecutor):
+            yield executor
+        else:
+            with batch.distributed(distributed_batch):
+                yield executor
+    finally:
+        _executor = before
+
+
+def distributed_batch(seeds, p: Params) -> BatchResult:
+    """run_batch(seeds, p) by the current executor: units small enough to keep its workers busy."""
+    n_seeds = len(np.asarray(list(seeds)))
+    return units_batch(p, seeds, "batch", block=min(SEED_BLOCK, -(-n_seeds // _executor.workers)))
+
+
+def units_batch(p: Params, seeds, name: str, store: Path | None = None,
+                block: int | None = SEED_BLOCK, log=None) -> BatchResult:
+    """run_batch(seeds, p)'s result, run as units (run_units: on the current executor, kept in
+    `store` when given); wall_s: the whole time, units read from the store included."""
     seeds = np.asarray(list(seeds), dtype=np.int64)
+    start = time.perf_counter()
+    arrays = run_units([(p, seeds)], name, store, block, log)[0]
+    return BatchResult(seeds, arrays["initial_angles"], arrays["steps"], arrays["end_status"],
+                       arrays["final_weights"], time.perf_counter() - start)
 
-    def learn():
-        r = run_batch(seeds, p)
-        return dict(steps=r.steps, end_status=r.end_status, final_weights=r.final_weights)
 
-    return stored(store_path(store, name, [p.to_dict(), seeds.tolist()]), learn)
+def run_units(jobs, name: str, store: Path | None = None, block: int | None = SEED_BLOCK,
+              log=None) -> list[dict]:
+    """For each job (params, seeds) the batch engine's arrays (UNIT_ARRAYS) of all its seeds, in
+    their order. Each job is cut into units of `block` seeds (None: one unit); with a `store`,
+    a unit stored there (under `name`) is read, not run, and each unit run is stored as soon as
+    it is back; the others run on the current executor, a progress bar counting the finished
+    units. log: a function given one line on what is stored and what is run where."""
+    units, paths, owner = [], [], []
+    for j, (p, seeds) in enumerate(jobs):
+        seeds = np.asarray(list(seeds), dtype=np.int64)
+        size = len(seeds) if block is None else block
+        for first in range(0, len(seeds), size):
+            part = seeds[first:first + size]
+            units.append((p, part))
+            owner.append(j)
+            paths.append(None if store is None
+                          else store_path(store, name, [p.to_dict(), part.tolist()]))
+    results = [None if path is None else load_stored(path) for path in paths]
+    missing = [k for k, arrays in enumerate(results) if arrays is None]
+    if log is not None:
+        log(f"{name}: {len(units)} units ({len(jobs)} configurations x blocks of up to "
+            f"{block or 'all'} seeds), {len(units) - len(missing)} stored, {len(missing)} to run "
+            f"on {_executor.where}")
+    with tqdm(total=len(units), initial=len(units) - len(missing), desc=name, unit="unit",
+              leave=False, disable=None, file=sys.stderr) as bar:
+        for i, arrays in _executor.run([units[k] for k in missing]):
+            k = missing[i]
+            if paths[k] is not None:
+                store_arrays(paths[k], arrays)
+            results[k] = arrays
+            bar.update(1)
+    out = []
+    for j in range(len(jobs)):
+        mine = [results[k] for k in range(len(units)) if owner[k] == j]
+        keys = [key for key in mine[0] if all(key in arrays for arrays in mine)]
+        out.append({key: np.concatenate([arrays[key] for arrays in mine]) for key in keys})
+    return out
+
+
+def stored_batch(p: Params, seeds, store: Path, name: str) -> dict:
+    """The batch engine's episodes (steps, end_status, final_weights, initial_angles) for p and
+    seeds, one unit of all of them, or those stored for the same parameters and seeds by an
+    earlier call."""
+    return run_units([(p, seeds)], name, store, block=None)[0]

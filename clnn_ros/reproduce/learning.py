@@ -9,11 +9,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..batch import BatchResult, run_batch
+from ..batch import BatchResult
 from ..core.params import Params
 from ..core.physics import CONTINUE
 from .calibration import Calibration
-from .common import LITERAL_EDGE, STUCK_BELOW, TRIALS, end_reason, progress, stuck, write_csv
+from .common import (LITERAL_EDGE, STUCK_BELOW, TRIALS, end_reason, progress, stuck, units_batch,
+                     write_csv)
 
 
 @dataclass
@@ -40,8 +41,11 @@ class PaperRuns:
         return self.one_sv, self.two_sv_literal, self.two_sv_best
 
 
-def learn_run(name: str, label: str, seeds, p: Params) -> Run:
-    return Run(name, label, p, run_batch(seeds, p))
+def learn_run(name: str, label: str, seeds, p: Params, store: Path | None = None,
+              log=None) -> Run:
+    """The batch engine's episodes of p on seeds, run as units on the current executor (and kept
+    in `store`, a unit at a time, when given: see run_units)."""
+    return Run(name, label, p, units_batch(p, seeds, "learn", store, log=log))
 
 
 def write_learn_outputs(run: Run, out: Path) -> list[Path]:

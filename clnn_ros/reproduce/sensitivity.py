@@ -12,7 +12,7 @@ import numpy as np
 
 from ..batch import run_batch
 from ..core.params import ParamError, Params, params_from_strings
-from .common import (STUCK_BELOW, TRIALS, SeedMeans, md_table, progress, stored_batch, stuck,
+from .common import (STUCK_BELOW, TRIALS, SeedMeans, md_table, progress, run_units, stuck,
                      write_csv)
 
 # ------------------------------------------------------------------------------------------------
@@ -57,21 +57,20 @@ def parse_grid(items: list[str]) -> dict[str, list[str]]:
     return grid
 
 
-def sweep(base: Params, grid: dict[str, list], seeds, store: Path) -> list[SweepRun]:
+def sweep(base: Params, grid: dict[str, list], seeds, store: Path, log=None) -> list[SweepRun]:
     """Every combination of the grid's values (text or numbers) on top of `base`, learned on
-    `seeds`. Every configuration is validated before the first runs (ParamError). A finished
-    configuration is stored in `store` and not run again (an interrupted sweep resumes)."""
+    `seeds`. Every configuration is validated before the first runs (ParamError). The units
+    (a configuration x a block of seeds) run on the current executor; a finished unit is stored
+    in `store` and not run again (an interrupted sweep resumes). log: see run_units."""
     names = list(grid)
     configs = []
     for combination in itertools.product(*(grid[n] for n in names)):
         given = dict(zip(names, combination))
         p = params_from_strings({k: str(v) for k, v in given.items()}, base)
         configs.append(({n: getattr(p, n) for n in names}, p))
-    runs = []
-    for values, p in progress(configs, "sweep"):
-        result = stored_batch(p, seeds, store, "sweep")
-        runs.append(SweepRun(values, p, np.asarray(seeds), result["steps"]))
-    return runs
+    results = run_units([(p, seeds) for _, p in configs], "sweep", store, log=log)
+    return [SweepRun(values, p, np.asarray(seeds), result["steps"])
+            for (values, p), result in zip(configs, results)]
 
 
 def write_sweep(runs: list[SweepRun], out: Path) -> list[Path]:
