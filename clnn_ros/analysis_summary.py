@@ -30,9 +30,11 @@ ANIMATION = "trial {trial}'s cart and pole, with each tick's spikes and action b
 ENVIRONMENTS = {
     "cartpole": ("the built-in cart-pole node (`python -m clnn_ros.nodes.environment`)",
                  "`{physics}` equations, `{integrator}` integration (the built-in node's)"),
-    "gymnasium": ("gymnasium's CartPole-v1 node (`python -m clnn_ros.nodes.gymnasium_env`)",
+    "gymnasium": ("gymnasium's CartPole-v1 node (`python -m clnn_ros.nodes.environment`, "
+                  "simulator gymnasium)",
                   "gymnasium's CartPole-v1 (the run's physics parameter does not apply)"),
-    "mujoco": ("the MuJoCo cart-pole node (`python -m clnn_ros.nodes.mujoco_env`)",
+    "mujoco": ("the MuJoCo cart-pole node (`python -m clnn_ros.nodes.environment`, simulator "
+               "mujoco)",
                "MuJoCo's, with gymnasium CartPole-v1's constants (the run's physics parameter "
                "does not apply)"),
     "external": ("an external node (`run_all --env external`: started outside run_all)",

@@ -1,7 +1,7 @@
 """Check that an environment node keeps the contract of docs/ENV_CONTRACT.md.
 
     python -m clnn_ros.check_env_node python -m clnn_ros.nodes.environment --ros-args -p physics:=paper
-    python -m clnn_ros.check_env_node python -m clnn_ros.nodes.gymnasium_env
+    python -m clnn_ros.check_env_node python -m clnn_ros.nodes.environment --ros-args -p simulator:=gymnasium
     python -m clnn_ros.check_env_node python examples/noisy_cartpole.py
 
 It starts the command in its own process as run_all would (with `--ros-args --params-file

@@ -39,7 +39,8 @@ DOMAIN_ID = free_domain_id()
 CHECKS = {
     "cartpole": ([PY, "-m", "clnn_ros.nodes.environment", "--ros-args", "-p", "physics:=paper"],
                  [], ["check_env_node: all rules pass"]),
-    "gymnasium": ([PY, "-m", "clnn_ros.nodes.gymnasium_env"], [],
+    "gymnasium": ([PY, "-m", "clnn_ros.nodes.environment", "--ros-args", "-p",
+                   "simulator:=gymnasium"], [],
                   ["check_env_node: all rules pass"]),
     "example": (["python", "examples/noisy_cartpole.py", "--ros-args", "-p", "force_noise:=0.2"],
                 [], ["check_env_node: all rules pass"]),
