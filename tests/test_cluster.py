@@ -265,7 +265,7 @@ def test_learn_on_an_existing_cluster_on_loopback_equals_local(tmp_path, loopbac
     status, out, err = finished(run_cli(tmp_path, [*learn, "--ray", loopback_head.address,
                                                    "--out", str(ray_out)], loopback_head.environ))
     assert status == 0, err
-    assert (f"learn: 2 units (1 configurations x blocks of up to 8 seeds), 0 stored, 2 to run "
+    assert (f"learn: 2 units (1 configuration x blocks of up to 8 seeds), 0 stored, 2 to run "
             f"on 2 Ray workers at {loopback_head.address}") in err
     assert csv_files(ray_out) == csv_files(local)  # learn_1sv.csv, final_weights_1sv.csv
     for name in ("final_weights", "steps", "end_status", "initial_angles", "seeds"):

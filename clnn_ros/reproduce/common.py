@@ -257,12 +257,13 @@ def units_batch(p: Params, seeds, name: str, store: Path | None = None,
 
 
 def run_units(jobs, name: str, store: Path | None = None, block: int | None = SEED_BLOCK,
-              log=None) -> list[dict]:
-    """For each job (params, seeds) the batch engine's arrays (UNIT_ARRAYS) of all its seeds, in
-    their order. Each job is cut into units of `block` seeds (None: one unit); with a `store`,
-    a unit stored there (under `name`) is read, not run, and each unit run is stored as soon as
-    it is back; the others run on the current executor, a progress bar counting the finished
-    units. log: a function given one line on what is stored and what is run where."""
+              log=None, keep=UNIT_ARRAYS) -> list[dict]:
+    """For each job (params, seeds) the batch engine's arrays (those of UNIT_ARRAYS in `keep`)
+    of all its seeds, in their order. Each job is cut into units of `block` seeds (None: one
+    unit); with a `store`, a unit stored there (under `name`) is read, not run, and each unit
+    run is stored whole as soon as it is back; the others run on the current executor, a
+    progress bar counting the finished units. log: a function given one line on what is stored
+    and what is run where."""
     units, paths, owner = [], [], []
     for j, (p, seeds) in enumerate(jobs):
         seeds = np.asarray(list(seeds), dtype=np.int64)
@@ -274,18 +275,19 @@ def run_units(jobs, name: str, store: Path | None = None, block: int | None = SE
             paths.append(None if store is None
                           else store_path(store, name, [p.to_dict(), part.tolist()]))
     results = [None if path is None else load_stored(path) for path in paths]
+    results = [None if arrays is None else kept(arrays, keep) for arrays in results]
     missing = [k for k, arrays in enumerate(results) if arrays is None]
     if log is not None:
-        log(f"{name}: {len(units)} units ({len(jobs)} configurations x blocks of up to "
-            f"{block or 'all'} seeds), {len(units) - len(missing)} stored, {len(missing)} to run "
-            f"on {_executor.where}")
+        log(f"{name}: {len(units)} units ({len(jobs)} configuration{'s' * (len(jobs) != 1)} x "
+            f"blocks of up to {block or 'all'} seeds), {len(units) - len(missing)} stored, "
+            f"{len(missing)} to run on {_executor.where}")
     with tqdm(total=len(units), initial=len(units) - len(missing), desc=name, unit="unit",
               leave=False, disable=None, file=sys.stderr) as bar:
         for i, arrays in _executor.run([units[k] for k in missing]):
             k = missing[i]
             if paths[k] is not None:
                 store_arrays(paths[k], arrays)
-            results[k] = arrays
+            results[k] = kept(arrays, keep)
             bar.update(1)
     out = []
     for j in range(len(jobs)):
@@ -293,6 +295,11 @@ def run_units(jobs, name: str, store: Path | None = None, block: int | None = SE
         keys = [key for key in mine[0] if all(key in arrays for arrays in mine)]
         out.append({key: np.concatenate([arrays[key] for arrays in mine]) for key in keys})
     return out
+
+
+def kept(arrays: dict, keep) -> dict:
+    """The arrays named in `keep` (a run keeps what it needs; the store keeps them all)."""
+    return {key: value for key, value in arrays.items() if key in keep}
 
 
 def stored_batch(p: Params, seeds, store: Path, name: str) -> dict:

@@ -68,7 +68,8 @@ def sweep(base: Params, grid: dict[str, list], seeds, store: Path, log=None) -> 
         given = dict(zip(names, combination))
         p = params_from_strings({k: str(v) for k, v in given.items()}, base)
         configs.append(({n: getattr(p, n) for n in names}, p))
-    results = run_units([(p, seeds) for _, p in configs], "sweep", store, log=log)
+    results = run_units([(p, seeds) for _, p in configs], "sweep", store, log=log,
+                        keep=("steps",))
     return [SweepRun(values, p, np.asarray(seeds), result["steps"])
             for (values, p), result in zip(configs, results)]
 
