@@ -7,25 +7,35 @@ actions.
 
 Unlike run_all, the launched graph writes results only with out:=DIR (run_all without --out
 writes them into a temporary folder that it removes).
+
+`Supervision` is what the launch does when a node's process exits (launch's OnProcessExit), as
+run_all's supervise does: a node that fails ends the launch at once with one line naming it
+(and a non-zero exit), so that neither a crash nor a node lost before the first tick leaves the
+launch waiting on a stall or forever.
 """
 
 from __future__ import annotations
 
+import signal
 from dataclasses import dataclass
 from pathlib import Path
 
 from .core.params import ParamError
 from .files import cannot_create
 from .graph.names import GRAPH_NODES, RECORDER, TRIAL_MANAGER, clock_remappings, namespace_problem
-from .graph.run import DEMO, ENVIRONMENTS, default_bag_path, run_values, write_params
+from .graph.run import DEMO, ENVIRONMENTS, RUN_SETTINGS, default_bag_path, run_values, write_params
+from .supervise import RECORDER_GRACE_S, SHUTDOWN_GRACE_S
 
-# launch argument: description; an empty value leaves it out. The first five are run values.
+# launch argument: description; an empty value leaves it out. RUN_VALUES are run values.
 ARGUMENTS = {
     "seed": f"the episode's seed (default {DEMO['seed']})",
     "trials": f"trials of the episode (default {DEMO['trials']})",
     "nsv": f"1: angle; 2: angle + cart velocity (default {DEMO['nsv']})",
     "state_vars": "the encoded state variables instead, in input order, e.g. "
                   "pole_angle,cart_position",
+    "stall_timeout": "seconds without a tick before the trial manager ends the run (default "
+                     f"{RUN_SETTINGS['stall_timeout_s']:g}; also how long env:=external's node is "
+                     "waited for)",
     "params_file": "a ROS 2 parameters YAML (/**: ros__parameters: ...)",
     "namespace": "put every node and topic under /NAME/",
     "env": f"environment node: {', '.join(ENVIRONMENTS)} (default cartpole)",
@@ -33,7 +43,8 @@ ARGUMENTS = {
     "bag": "the bag directory of the recording (default <out>/bag with out, else "
            "bags/run_<UTC time>)",
 }
-RUN_VALUES = ("seed", "trials", "nsv", "state_vars")
+RUN_VALUES = {"seed": "seed", "trials": "trials", "nsv": "nsv", "state_vars": "state_vars",
+              "stall_timeout": "stall_timeout_s"}  # launch argument: run value
 RECORD = "record"  # launch argument: true (default) or false, as run_all's --no-record
 
 
@@ -59,7 +70,7 @@ def plan(arguments: dict[str, str], workdir: Path) -> list[NodeLaunch]:
     out = Path(given["out"]).resolve() if "out" in given else None
     if out is not None and (problem := cannot_create(out)):
         raise ParamError(f"out {out}: {problem}")
-    flags = {name: given[name] for name in RUN_VALUES if name in given}
+    flags = {value: given[name] for name, value in RUN_VALUES.items() if name in given}
     if env != "external":
         flags["simulator"] = env
     values, _ = run_values(DEMO, None, Path(given["params_file"]) if "params_file" in given
@@ -79,3 +90,77 @@ def plan(arguments: dict[str, str], workdir: Path) -> list[NodeLaunch]:
     return nodes + [NodeLaunch(name, namespace, params_file, remappings)
                     for name in (*GRAPH_NODES, TRIAL_MANAGER)
                     if name != "environment" or env != "external"]
+
+
+def exit_description(name: str, returncode: int) -> str:
+    """The line run_all says: `node 'x' exited with status 3`, `node 'x' died (SIGKILL)`."""
+    how = f"exited with status {returncode}" if returncode >= 0 else \
+        f"died ({signal.Signals(-returncode).name})"
+    return f"node '{name}' {how}"
+
+
+@dataclass(frozen=True)
+class Step:
+    """What the launch does after an exit or when its timer fires: `fail`: end now with this
+    line and a non-zero exit; `stop`: end now, normally (exit 0), saying this line; `timer`:
+    None leaves the timer as it is, 0 cancels it, else it is started anew for that many
+    seconds (then `Supervision.timed_out`)."""
+    fail: str | None = None
+    stop: str | None = None
+    timer: float | None = None
+
+
+class Supervision:
+    """The launched graph's processes, watched as run_all watches them (clnn_ros.supervise).
+    `exited` is told each exit that happens while the launch is not shutting down (on the
+    launch's own shutdown, Ctrl-C or a failure, every node is asked to stop: its exit is
+    expected, whatever its status).
+
+    * The trial manager exits 0: the episode is over; the others end by themselves on its
+      EPISODE_END, within SHUTDOWN_GRACE_S (the recorder RECORDER_GRACE_S more); then the
+      launch ends (exit 0), ending those still running.
+    * A node exits with an error or a signal: the launch ends at once, failed. The trial manager
+      with an error (a stall, another graph, a foreign publisher, a full disk) has told the
+      others the episode ended: they get the grace to end (the recorder finishes the bag).
+    * Another node exits 0 before the trial manager: after EPISODE_END, the trial manager
+      itself ends within SHUTDOWN_GRACE_S; otherwise the node was stopped by someone else (the
+      trial manager would wait for it with no end before the first tick, or stall): failed."""
+
+    def __init__(self, names: list[str]):
+        self.running = set(names)
+        self.episode_over = False
+        self.failure: str | None = None  # the line, once the launch is to fail
+        self.quitter: str | None = None  # the first node that exited 0 before the episode end
+
+    def end_grace_s(self) -> float:
+        return SHUTDOWN_GRACE_S + (RECORDER_GRACE_S if RECORDER in self.running else 0.0)
+
+    def exited(self, name: str, returncode: int) -> Step:
+        self.running.discard(name)
+        if returncode != 0:
+            self.failure = self.failure or self.quit_early() or \
+                exit_description(name, returncode)
+            if name == TRIAL_MANAGER and returncode > 0 and self.running:
+                return Step(timer=self.end_grace_s())  # it sent EPISODE_END
+            return Step(fail=self.failure)
+        if name == TRIAL_MANAGER:
+            self.episode_over = True
+            return Step(timer=self.end_grace_s() if self.running else 0.0)
+        if self.episode_over or self.failure:
+            if self.running:
+                return Step()
+            return Step(fail=self.failure) if self.failure else Step(timer=0.0)
+        if self.quitter is None:
+            self.quitter = name
+            return Step(timer=SHUTDOWN_GRACE_S)
+        return Step()
+
+    def timed_out(self) -> Step:
+        if self.episode_over and not self.failure:
+            return Step(stop=f"{', '.join(sorted(self.running))} still running after the "
+                             f"episode ended: stopped")
+        return Step(fail=self.failure or self.quit_early())
+
+    def quit_early(self) -> str | None:
+        return f"node '{self.quitter}' exited with status 0 before the episode ended" \
+            if self.quitter else None

@@ -1,8 +1,10 @@
 """ros_package/, the ament_python package clnn_ros for a ROS 2 workspace: its manifest, its setup
-metadata and executables, the launch plan (what graph.launch.py starts, against run_all), and,
-where colcon is installed, a `colcon build` of it and what its install tree holds.
+metadata and executables, the launch plan (what graph.launch.py starts, against run_all) and its
+supervision (what it does when a node exits), and, where colcon is installed, a `colcon build`
+of it and what its install tree holds.
 
-`ros2 launch` itself is not on PyPI: the launch file is only compiled here."""
+`ros2 launch` itself is not on PyPI: the launch file is only compiled here; tests/test_launch.py
+runs it with launch's sources where they are prepared (docs/ROS_GRAPH.md, Under `ros2 launch`)."""
 
 from __future__ import annotations
 
@@ -22,6 +24,7 @@ from catkin_pkg.package import parse_package
 from clnn_ros import launch_plan, run_all
 from clnn_ros.core.params import ParamError
 from clnn_ros.graph.run import node_arguments
+from clnn_ros.launch_plan import Step, Supervision
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE_DIR = ROOT / "ros_package"
@@ -122,14 +125,16 @@ def test_launch_arguments_are_run_alls_options(tmp_path):
     params_file = tmp_path / "p.yaml"
     params_file.write_text("/**:\n  ros__parameters:\n    sigma: 4\n")
     arguments = {"seed": "3", "trials": "7", "nsv": "2", "params_file": str(params_file),
-                 "namespace": "robot1", "env": "gymnasium", "out": str(out), "record": "false"}
+                 "namespace": "robot1", "env": "gymnasium", "out": str(out), "record": "false",
+                 "stall_timeout": "12.5"}
     nodes = launch_plan.plan(arguments, tmp_path)
     assert [n.executable for n in nodes] == list(run_all.NODES)
     expected = run_all.build_parameters(run_all.parse_args(
         ["--seed", "3", "--trials", "7", "--nsv", "2", "--params-file", str(params_file),
-         "--env", "gymnasium"]))
+         "--env", "gymnasium", "--stall-timeout", "12.5"]))
     assert params(nodes[0].params_file) == {**expected, "out_dir": str(out.resolve())}
     assert expected["sigma"] == 4 and expected["simulator"] == "gymnasium"
+    assert expected["stall_timeout_s"] == 12.5
     for node in nodes:  # the same command-line arguments as run_all gives its processes
         assert ["--ros-args", "--params-file", str(node.params_file), "--log-level",
                 node.log_level, "-r", f"__ns:={node.namespace}",
@@ -149,6 +154,46 @@ def test_bad_launch_arguments_are_one_line(tmp_path, arguments, line):
     with pytest.raises(ParamError) as refused:
         launch_plan.plan(arguments, tmp_path)
     assert str(refused.value).startswith(line)
+
+
+GRAPH = ["recorder", *run_all.NODES]
+END_GRACE_S = launch_plan.SHUTDOWN_GRACE_S + launch_plan.RECORDER_GRACE_S
+
+
+@pytest.mark.parametrize("exits, steps", [
+    ([("encoder", 0), ("trial_manager", 0), ("agent", 0), ("reward", 0), ("environment", 0),
+      ("recorder", 0)],  # the episode's end: a node may see EPISODE_END first
+     [Step(timer=launch_plan.SHUTDOWN_GRACE_S), Step(timer=END_GRACE_S), Step(), Step(),
+      Step(), Step(timer=0.0)]),
+    ([("agent", -9)], [Step(fail="node 'agent' died (SIGKILL)")]),
+    ([("recorder", 1)], [Step(fail="node 'recorder' exited with status 1")]),
+    ([("trial_manager", -15)], [Step(fail="node 'trial_manager' died (SIGTERM)")]),
+    # a stall: the trial manager sent EPISODE_END, the recorder finishes the bag, then the failure
+    ([("trial_manager", 1), ("agent", 0), ("encoder", 0), ("reward", 0), ("environment", 0),
+      ("recorder", 0)],
+     [Step(timer=END_GRACE_S), Step(), Step(), Step(), Step(),
+      Step(fail="node 'trial_manager' exited with status 1")]),
+    # stopped by someone else (exit 0 on SIGTERM), then the trial manager's stall: it is named
+    ([("reward", 0), ("trial_manager", 1), ("recorder", 1)],
+     [Step(timer=launch_plan.SHUTDOWN_GRACE_S), Step(timer=END_GRACE_S),
+      Step(fail="node 'reward' exited with status 0 before the episode ended")]),
+])
+def test_the_launch_ends_when_the_episode_ends_and_at_once_when_a_node_fails(exits, steps):
+    supervision = Supervision(GRAPH)
+    assert [supervision.exited(name, code) for name, code in exits] == steps
+
+
+def test_the_launch_ends_a_node_that_does_not_end():
+    quit_early = Supervision(GRAPH)
+    quit_early.exited("reward", 0)  # and the trial manager waits for it
+    assert quit_early.timed_out() == Step(
+        fail="node 'reward' exited with status 0 before the episode ended")
+    after_the_end = Supervision(GRAPH)
+    assert after_the_end.exited("trial_manager", 0) == Step(timer=END_GRACE_S)
+    for name in ("agent", "encoder", "reward", "environment"):
+        assert after_the_end.exited(name, 0) == Step()
+    assert after_the_end.timed_out() == Step(
+        stop="recorder still running after the episode ended: stopped")
 
 
 def colcon() -> str | None:
