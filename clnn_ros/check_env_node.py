@@ -5,13 +5,17 @@
     python -m clnn_ros.check_env_node python examples/noisy_cartpole.py
 
 It starts the command in its own process as run_all would (with `--ros-args --params-file
-<file> -r __ns:=/NS -r /clock:=/NS/clock` appended, the file setting max_steps; a pipe on stdin
-and CLNN_ROS_EXIT_WITH_STDIN=1), in a private ROS_DOMAIN_ID on loopback and in a namespace of its
+<file> -r __ns:=/NS -r /clock:=/NS/clock` appended, the file holding every parameter an
+environment takes, as a run's does: max_steps 60 and a cart-pole with masses, length and gravity
+other than the defaults; a pipe on stdin and CLNN_ROS_EXIT_WITH_STDIN=1), in a private ROS_DOMAIN_ID on loopback and in a namespace of its
 own (default /check_env_node: a node that uses absolute topic names fails), and plays trial
 manager and agent against it: a balancing trial up to the max_steps cap, a trial pushed with
 constant +F until it fails, malformed inputs in between, then EPISODE_END; then it starts the
 command once more and closes its stdin. For each rule of the contract it prints PASS or FAIL
-with what the node did wrong. Exit status 0 when all pass, 1 otherwise, 2 on a usage error.
+with what the node did wrong. The rule `physics` (the states follow the core's cart-pole with
+the file's physics) is advice, a WARN line, for a simulator of its own (gymnasium, friction, a
+robot); --physics-from-run makes it a rule. Exit status 0 when all pass, 1 otherwise, 2 on a
+usage error.
 Only public rclpy. The rules and the checker: clnn_ros.check_env.
 """
 
@@ -25,9 +29,11 @@ from pathlib import Path
 
 from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
 
-from .check_env.rules import MAX_STEPS, RULES
+from .check_env.rules import (CHECKED_RUN, MAX_STEPS, RULES, RUN_PHYSICS, STRICT_PHYSICS,
+                              physics_summary)
 from .cli import OneLineArgumentParser
 from .graph.names import namespace_problem
+from .graph.run import run_values, write_params
 from .process_signals import EXIT_WITH_STDIN
 
 __all__ = ["RULES", "main"]
@@ -52,6 +58,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="seconds the node gets to announce readiness once it is in the "
                              "graph, and discovery to match the checker's endpoints with the "
                              "node's")
+    parser.add_argument(STRICT_PHYSICS, action="store_true",
+                        help="the node simulates the run's cart-pole (its physics parameters): "
+                             "a state that does not follow it is a FAIL, not a WARN")
     parser.add_argument("command", nargs=argparse.REMAINDER, help="the node's command line")
     args = parser.parse_args(argv)
     if not args.command:
@@ -62,19 +71,22 @@ def main(argv: list[str] | None = None) -> int:
     if not 0 <= args.domain_id <= 232:
         parser.error("--domain-id must be 0..232")
     with tempfile.TemporaryDirectory(prefix="check_env_node_") as tmp:
-        params_file = Path(tmp) / "params.yaml"
-        params_file.write_text(f"/**:\n  ros__parameters:\n    max_steps: {MAX_STEPS}\n")
+        # what a run's file holds for an environment (graph.run.ENVIRONMENT_GIVEN)
+        values, _ = run_values({"max_steps": MAX_STEPS, **RUN_PHYSICS})
+        params_file = write_params(Path(tmp) / "params.yaml", values)
         env = {**os.environ, "ROS_DOMAIN_ID": str(args.domain_id), EXIT_WITH_STDIN: "1",
                "ROS_AUTOMATIC_DISCOVERY_RANGE": os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE",
                                                                "LOCALHOST")}
         env.setdefault("ROS_LOG_DIR", str(Path(tmp) / "ros_log"))
         print(f"check_env_node: {' '.join(args.command)} (ROS_DOMAIN_ID {args.domain_id}, "
-              f"namespace {args.namespace}, max_steps {MAX_STEPS})", flush=True)
+              f"namespace {args.namespace}, max_steps {MAX_STEPS}, "
+              f"{physics_summary(CHECKED_RUN)})", flush=True)
         # after the arguments: --help and a usage error need no ROS
         from .check_env.probe import Probe
         from .check_env.scenario import run_checks
         findings = run_checks(Probe(args.command, args.namespace, args.domain_id,
-                                    args.startup_timeout, params_file, env))
+                                    args.startup_timeout, params_file, env),
+                              strict_physics=args.physics_from_run)
     ok = findings.report()
     print(f"check_env_node: {'all rules pass' if ok else 'the node breaks the contract'}")
     return 0 if ok else 1

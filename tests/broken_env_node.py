@@ -5,11 +5,14 @@
 BUG: no_reset (successful_steps not reset at START), wrong_tick (the state of tick 2 and later
 is published with the tick one too high), no_exit (ignores EPISODE_END), accept_bad_force
 (applies force_direction 5 as +F), silent (never announces readiness), mute (stops publishing
-states at tick 50 but stays alive), crash (raises at start).
+states at tick 50 but stays alive), crash (raises at start), default_cart_mass (steps the default
+cart_mass, not the run's).
 """
 
 import sys
 
+from clnn_ros.core.params import Params
+from clnn_ros.core.physics import CartPole
 from clnn_ros.graph.fields import tick_stamp
 from clnn_ros.nodes.environment import EnvironmentNode
 from clnn_ros.nodes.glue import run_node
@@ -25,6 +28,8 @@ class BrokenEnvironmentNode(EnvironmentNode):
         super().__init__(run, **options)
         if "silent" in BUGS:
             self.readiness.cancel()
+        if "default_cart_mass" in BUGS:
+            self.cartpole = CartPole(self.params.replace(cart_mass=Params().cart_mass))
         refuse, publish = self.refusals.refuse, self.state_pub.publish
 
         def accept_bad_force(topic: str, msg, reason: str, kind: str = "tick") -> None:

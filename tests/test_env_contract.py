@@ -18,13 +18,19 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
+from clnn_ros import run_all
 from clnn_ros.batch import run_batch
+from clnn_ros.check_env.rules import CHECKED_RUN, RUN_PHYSICS, check_physics
 from clnn_ros.check_env_node import RULES
 from clnn_ros.core.encoder import Encoder
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.gym_physics import GymCartPole, gym_matched_params
 from clnn_ros.core.params import ParamError, Params, params_from_strings
+from clnn_ros.core.physics import CartPole
+from clnn_ros.graph.names import RECORDER
+from clnn_ros.graph.run import ENVIRONMENT_GIVEN
 
 from conftest import HANG_S, assert_run_equals_episode, free_domain_id
 
@@ -39,11 +45,15 @@ DOMAIN_ID = free_domain_id()
 CHECKS = {
     "cartpole": ([PY, "-m", "clnn_ros.nodes.environment", "--ros-args", "-p", "physics:=paper"],
                  [], ["check_env_node: all rules pass"]),
+    # simulators of their own: the physics rule is a WARN
     "gymnasium": ([PY, "-m", "clnn_ros.nodes.environment", "--ros-args", "-p",
                    "simulator:=gymnasium"], [],
-                  ["check_env_node: all rules pass"]),
+                  ["check_env_node: all rules pass", "WARN  physics: "]),
     "example": (["python", "examples/noisy_cartpole.py", "--ros-args", "-p", "force_noise:=0.2"],
-                [], ["check_env_node: all rules pass"]),
+                [], ["check_env_node: all rules pass", "WARN  physics: "]),
+    # ignores the run's cart_mass: a FAIL that names it, with --physics-from-run
+    "default_cart_mass": ([PY, BROKEN, "default_cart_mass"], ["--physics-from-run"],
+                          ["FAIL  physics: ", "PASS  reset", "PASS  failure"]),
     "no_reset": ([PY, BROKEN, "no_reset"], [],
                  ["FAIL  reset: successful_steps not reset at START (was 60, published 60)"]),
     "wrong_tick": ([PY, BROKEN, "wrong_tick"], [],
@@ -89,8 +99,63 @@ def test_checker(checks, name):
     lines = report.splitlines()
     for expected in CHECKS[name][2]:
         assert any(line.startswith(expected) for line in lines), report
-    if name in PASSING:
-        assert sum(line.startswith("PASS  ") for line in lines) == len(RULES), report
+    if name in PASSING:  # and the project's cart-pole passes the physics rule too
+        assert sum(line.startswith("PASS  ") for line in lines) == \
+            len(RULES) + (name == "cartpole"), report
+    if name == "default_cart_mass":
+        assert "it steps cart_mass 0.711 kg (the default), not the run's 0.9" in report, report
+
+
+def steps_of(cartpole: CartPole, directions) -> list:
+    """(state before, direction, state after, tick) of a cart-pole pushed with `directions`."""
+    cartpole.reset(1.0)
+    steps = []
+    for tick, direction in enumerate(directions, 1):
+        before = cartpole.state
+        cartpole.step(int(direction > 0))
+        steps.append((before, direction, cartpole.state, tick))
+    return steps
+
+
+def test_physics_rule_names_the_ignored_parameter():
+    """The checker's run is not the default cart-pole; a node that keeps a default instead of
+    the run's value is told which, one that steps the run's passes."""
+    assert all(getattr(CHECKED_RUN, name) != getattr(Params(), name) for name in RUN_PHYSICS)
+    directions = [1, -1, -1, 1, 1, 1, -1, 1] * 3
+    assert list(check_physics(steps_of(CartPole(CHECKED_RUN), directions))) == []
+    for name in RUN_PHYSICS:
+        kept_default = CHECKED_RUN.replace(**{name: getattr(Params(), name)})
+        [problem] = check_physics(steps_of(CartPole(kept_default), directions))
+        assert f"it steps {name} {getattr(Params(), name):g}" in problem, problem
+    [problem] = check_physics(steps_of(CartPole(CHECKED_RUN.replace(physics="correct")),
+                                       directions))
+    assert "it steps physics correct, integrator semi_implicit" in problem, problem
+
+
+def documented_parameters() -> dict:
+    """The table of docs/ENV_CONTRACT.md's section "Parameters": {name: default run value}."""
+    text = (ROOT / "docs" / "ENV_CONTRACT.md").read_text()
+    section = text[text.index("## Parameters\n"):text.index("**The run's cart-pole.**")]
+    rows = [line.split("|")[1:-1] for line in section.splitlines()
+            if line.startswith("| `")]
+    return {name.strip().strip("`"): yaml.safe_load(value.strip().strip("`"))
+            for name, _type, value, _meaning in rows}
+
+
+def test_the_contract_lists_every_parameter_of_the_runs_file_with_its_value():
+    """An outside node written from docs/ENV_CONTRACT.md alone: the run's file of a default run
+    (what run_all writes when it records) holds each parameter of the table, at the documented
+    value, the physics as numbers."""
+    values = {**run_all.build_parameters(run_all.parse_args([])), "extra_nodes": RECORDER}
+    documented = documented_parameters()
+    assert set(documented) == {*ENVIRONMENT_GIVEN, "extra_nodes"}
+    assert documented == {name: values[name] for name in documented}
+    # an --env-node run too, whatever its options: every value, at the run's
+    values = run_all.build_parameters(run_all.parse_args(
+        ["--env-node", "python my_env.py", "--physics", "correct", "--option", "cart_mass=1.5"]))
+    assert set(ENVIRONMENT_GIVEN) <= set(values) and "simulator" not in values
+    assert (values["physics"], values["cart_mass"], values["pole_mass"]) == \
+        ("correct", 1.5, Params().pole_mass)
 
 
 # Each graph of this module runs in a namespace of its own (but the one that tests the root

@@ -21,6 +21,8 @@ class Lockstep:
         self.trial = 0
         self.steps = 0  # successful steps of the current trial, as the harness counts them
         self.last = None  # the last state
+        # (state before, force direction, state after, tick) of each step taken as sent
+        self.transitions: list[tuple[tuple, int, tuple, int]] = []
 
     def quiet(self, rule: str, what: str) -> bool:
         """No state may come now; True when none came."""
@@ -76,7 +78,7 @@ class Lockstep:
     def step(self, direction: int, order: str = "both") -> CartPoleState:
         """action(t-1) and clock(t); `order`: "both", "action first" or "clock first" (probe
         that neither alone makes a state), "action only" or "clock only" (the other is out)."""
-        t = self.tick
+        t, before = self.tick, self.last
         if order in ("action only", "clock only"):
             if order == "action only":
                 self.node.action(t - 1, self.trial, direction)
@@ -100,6 +102,9 @@ class Lockstep:
         self.findings.fail_all("successful_steps", check_step_counted(msg, self.steps, t,
                                                                       self.trial))
         self.steps += not msg.failed
+        if before is not None and before.tick == t - 1 and before.trial == msg.trial and \
+                msg.tick == t and not before.failed:
+            self.transitions.append((values(before), direction, values(msg), t))
         return msg
 
     def expect_refusal(self, rule: str, send: Callable[[], object], what: str) -> None:
@@ -118,3 +123,9 @@ class Lockstep:
     def balance(msg: CartPoleState) -> int:
         """The harness's controller: push towards where the pole is falling."""
         return 1 if msg.pole_angle_deg + 0.5 * msg.pole_angular_velocity_deg_per_s > 0 else -1
+
+
+def values(msg: CartPoleState) -> tuple:
+    """The state as the core's cart-pole keeps it: x m, dx/dt m/s, angle deg, rate deg/s."""
+    return (msg.cart_position_m, msg.cart_velocity_m_per_s, msg.pole_angle_deg,
+            msg.pole_angular_velocity_deg_per_s)

@@ -9,6 +9,8 @@ from __future__ import annotations
 import math
 from typing import Iterable, Iterator
 
+from ..core.params import INTEGRATORS, PHYSICS, Params
+from ..core.physics import cartpole_step, physics_constants
 from ..graph.fields import FAILURE_REASONS, stamp_nanoseconds, tick_nanoseconds
 from ..graph.names import ACTION, CLOCK, READY, STATE, TOPIC_TYPES, TRIAL_EVENT
 from ..process_signals import EXIT_WITH_STDIN
@@ -34,9 +36,24 @@ RULES = {
     "episode_end": "exits with status 0 on EPISODE_END",
     "stdin_eof": f"with {EXIT_WITH_STDIN}=1, exits when its stdin reaches end of file",
 }
+# Advisory unless --physics-from-run: a simulator of its own (gymnasium, friction, a robot)
+# steps other physics than the run's and keeps the contract.
+PHYSICS_RULE = {
+    "physics": "the states follow the run's cart-pole: the equations of docs/ENV_CONTRACT.md "
+               "with the physics parameters of the run's file",
+}
+STRICT_PHYSICS = "--physics-from-run"
 NAME = "environment"  # the checked node's name
 MAX_STEPS = 60  # the cap the checked node gets; the failing trial must fail before it
 ANGLE_LIMIT_DEG, TRACK_LIMIT_M, TAU, FORCE_N = 12.0, 2.4, 0.02, 10.0  # the defaults it gets
+# The cart-pole of the checker's run: the paper's equations with masses, length and gravity
+# other than the defaults, so that a node that keeps the defaults instead of reading the run's
+# file is told. Force, tau and the limits stay the defaults: the harness and the rules use them.
+RUN_PHYSICS = {"cart_mass": 0.9, "pole_mass": 0.15, "pole_length": 0.4, "gravity": 9.81}
+CHECKED_RUN = Params(max_steps=MAX_STEPS, **RUN_PHYSICS)
+UNITS = {"cart_mass": "kg", "pole_mass": "kg", "pole_length": "m", "gravity": "m/s^2"}
+# A state follows the physics within this (relative, absolute): a node may work in radians.
+PHYSICS_TOLERANCE = (1e-6, 1e-9)
 TAU_NS = tick_nanoseconds(TAU)
 TYPES = {topic: TOPIC_TYPES[topic] for topic in (STATE, CLOCK, TRIAL_EVENT, ACTION)}
 SHOWN_PER_RULE = 3  # FAIL lines per rule; more problems are counted
@@ -50,10 +67,11 @@ class Findings:
     """The problems found per rule (the first SHOWN_PER_RULE of each, the others counted) and
     the rules checked at all."""
 
-    def __init__(self):
-        self.problems = {rule: [] for rule in RULES}
+    def __init__(self, strict_physics: bool = False):
+        self.problems = {rule: [] for rule in {**RULES, **PHYSICS_RULE}}
         self.checked = set()
         self.more = {}  # rule: problems found beyond those shown
+        self.strict_physics = strict_physics  # physics a rule, not advice
 
     def fail(self, rule: str, text: str) -> None:
         if text in self.problems[rule]:
@@ -72,17 +90,22 @@ class Findings:
         self.problems[rule].append(f"not checked: {why}")
 
     def report(self) -> bool:
-        """A PASS, FAIL or SKIP line per rule; True when every rule passes."""
+        """A PASS, FAIL or SKIP line per rule (physics: WARN instead of FAIL unless strict);
+        True when every rule passes."""
         ok = True
-        for rule, meaning in RULES.items():
+        for rule, meaning in {**RULES, **PHYSICS_RULE}.items():
             problems = self.problems[rule]
+            binding = rule in RULES or self.strict_physics
             if rule not in self.checked:
                 print(f"SKIP  {rule}: not checked (an earlier failure stopped the check)")
-                ok = False
+                ok = ok and not binding
             elif problems:
-                ok = False
+                ok = ok and not binding
                 for text in problems:
-                    print(f"FAIL  {rule}: {text}")
+                    print(f"{'FAIL' if binding else 'WARN'}  {rule}: {text}")
+                if not binding:
+                    print(f"WARN  {rule}: fine for a simulator of its own (gymnasium, friction, "
+                          f"a robot); {STRICT_PHYSICS} makes this a FAIL")
                 if self.more.get(rule):
                     print(f"FAIL  {rule}: ... and {self.more[rule]} more like these")
             else:
@@ -170,3 +193,59 @@ def check_one_state_per_tick(states) -> Iterator[str]:
     for tick, count in sorted(seen.items()):
         if count > 1:
             yield f"publishes {count} states for tick {tick}"
+
+
+def check_physics(steps, run: Params = CHECKED_RUN) -> Iterator[str]:
+    """physics: each step (the state before, the force direction, the state after, its tick)
+    is one step of the core's cart-pole (clnn_ros.core.physics) with the run's parameters; a
+    problem names the first step that differs, and what the node seems to step instead."""
+    wrong = [step for step in steps if not follows(step, run)]
+    if not wrong:
+        return
+    before, direction, after, tick = wrong[0]
+    expected = expected_state(before, direction, run)
+    shown = ", ".join(f"{name} {got:.9g} (expected {want:.9g})" for name, got, want in zip(
+        ("x", "dx/dt", "angle", "rate"), after, expected) if not close(got, want))
+    guess = next((what for what, other in other_physics(run)
+                  if all(follows(step, other) for step in steps)), None)
+    instead = f"; it steps {guess}" if guess else ""
+    yield f"{len(wrong)} of {len(steps)} steps do not follow the run's cart-pole " \
+          f"({physics_summary(run)}): tick {tick}, {'+' if direction > 0 else '-'}F: " \
+          f"{shown}{instead}"
+
+
+def physics_summary(run: Params) -> str:
+    """'physics paper, semi_implicit, cart_mass 0.9 kg, ...': what the checker's run gives."""
+    return ", ".join([f"physics {run.physics}", run.integrator,
+                      *(f"{name} {getattr(run, name):g} {UNITS[name]}" for name in RUN_PHYSICS)])
+
+
+def expected_state(before, direction: int, run: Params) -> tuple:
+    return cartpole_step(*before, direction * run.force, physics_constants(run))[:4]
+
+
+def close(got: float, want: float) -> bool:
+    return math.isclose(got, want, rel_tol=PHYSICS_TOLERANCE[0], abs_tol=PHYSICS_TOLERANCE[1])
+
+
+def follows(step, run: Params) -> bool:
+    before, direction, after, _ = step
+    return all(close(got, want) for got, want in zip(after, expected_state(before, direction,
+                                                                           run)))
+
+
+def other_physics(run: Params) -> Iterator[tuple[str, Params]]:
+    """(what, the Params) of what a node may step instead of the run's cart-pole: a parameter of
+    the run's file ignored (its default kept), all of them, another physics or integrator."""
+    default = Params()
+    for name in RUN_PHYSICS:
+        yield f"{name} {getattr(default, name):g} {UNITS[name]} (the default), not the " \
+              f"run's {getattr(run, name):g}", run.replace(**{name: getattr(default, name)})
+    yield "the default cart-pole (it ignores the run's physics parameters)", \
+        run.replace(**{name: getattr(default, name) for name in RUN_PHYSICS})
+    for physics in PHYSICS:
+        for integrator in INTEGRATORS:
+            if (physics, integrator) != (run.physics, run.integrator):
+                yield f"physics {physics}, integrator {integrator}, not the run's " \
+                      f"{run.physics}, {run.integrator}", \
+                    run.replace(physics=physics, integrator=integrator)

@@ -14,21 +14,27 @@ from .interface import connect
 from .lockstep import Lockstep
 from .probe import APPEAR_S, EXIT_S, Probe
 from .rules import (ANGLE_LIMIT_DEG, MAX_STEPS, NAME, Abort, Findings, check_capped,
-                    check_one_state_per_tick)
+                    check_one_state_per_tick, check_physics)
 
 
-def run_checks(probe: Probe) -> Findings:
-    """Every rule of the contract checked against the probe's command."""
-    findings = Findings()
+def run_checks(probe: Probe, strict_physics: bool = False) -> Findings:
+    """Every rule of the contract checked against the probe's command (the physics: advice,
+    unless `strict_physics`)."""
+    findings = Findings(strict_physics)
     with probe.session():
         probe.start_process()
+        play = None
         try:
             connect(probe, findings)
-            play_episode(Lockstep(probe, findings))
+            play = Lockstep(probe, findings)
+            play_episode(play)
         except Abort:
             pass
         finally:
             probe.stop_process()
+        if play is not None and play.transitions:
+            findings.checked.add("physics")
+            findings.fail_all("physics", check_physics(play.transitions))
         if not findings.problems["starts"]:
             check_stdin_eof(probe, findings)
         states = list(probe.node.states)

@@ -64,6 +64,11 @@ NODE_PARAMETERS = {
                     "angle_span_deg", "stall_timeout_s", "out_dir", "progress",
                     "external_nodes"),
 }
+# What the run's params file always holds, at its effective value, for an environment node of
+# someone else's: the parameters of docs/ENV_CONTRACT.md's table (tests/test_env_contract.py
+# holds them equal). Not extra_nodes (the run sets it), nor simulator (the project's node's own
+# setting: an --env-node command's -p simulator:=... must not be overridden).
+ENVIRONMENT_GIVEN = ("tau", *PHYSICS_PARAMETERS, "max_steps", "marker_period_ticks")
 # The recorder keeps every value of the run in its bag.
 NODE_PARAMETERS[RECORDER] = tuple(sorted({*Params().to_dict(), *RUN_SETTINGS}))
 
@@ -255,6 +260,12 @@ def run_values(defaults: dict, preset: str | None = None, params_file: Path | No
     values["nsv"] = params.nsv  # the count state_vars gives
     for key in set(values) & set(RUN_SETTINGS):
         values[key] = convert_setting(key, values[key])
+    # An environment node of someone else's knows no defaults of ours: the physics as numbers.
+    model = params.to_dict()
+    for name in ENVIRONMENT_GIVEN:
+        if name not in values:
+            value = model[name] if name in model else RUN_SETTINGS[name]
+            values[name] = list(value) if isinstance(value, tuple) else value
     return values, params
 
 
