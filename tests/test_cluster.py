@@ -181,6 +181,16 @@ def test_without_ray_it_is_one_line_and_nothing_is_written(tmp_path, capsys, mon
     assert not (tmp_path / "o").exists()
 
 
+def test_bad_parameters_are_refused_before_ray_starts(tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "ray", None)  # Ray would say it is missing, were it asked
+    for command in (["sweep", "--param", "sigma=128,x"], ["learn", "--option", "sigma=x"]):
+        assert main([*command, "--seeds", "0", "--trials", "2", "--ray",
+                     "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "sigma must be" in err[0], err
+    assert not (tmp_path / "o").exists()
+
+
 @pytest.mark.parametrize("ray_args, status, message", [
     (["--ray", "no-port"], 2, "give the head's HOST:PORT"),
     (["--ray", "127.0.0.1:FREE"], 1, "cannot reach the Ray cluster at 127.0.0.1:"),

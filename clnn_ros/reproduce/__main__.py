@@ -46,8 +46,9 @@ from .physics_modes import physics_markdown, physics_runs, write_physics
 from .state_variables import (STATE_VAR_SEEDS, state_variable_runs, state_variables_markdown,
                               write_state_variables)
 from .sensitivity import (SENSITIVITY_SEEDS, check_sweep_names, parse_grid,
-                          sensitivity, sensitivity_markdown, sweep, sweep_summary_markdown,
-                          write_sensitivity, write_sweep, write_sweep_report)
+                          sensitivity, sensitivity_markdown, sweep, sweep_configs,
+                          sweep_summary_markdown, write_sensitivity, write_sweep,
+                          write_sweep_report)
 from .goals import REPORT_SEEDS, SELECT_SEEDS as GOAL_SELECT_SEEDS, PLAY_EPISODES, goals_study, \
     goals_markdown, plot_curves, write_goals
 from .report import claims_markdown, data_files_markdown, header_markdown, write_report
@@ -138,9 +139,9 @@ def cmd_sweep(args) -> None:
     seeds = parse_seeds(args.seeds)
     grid = parse_grid(args.param)
     check_sweep_names(grid)
-    base = learn_params(args)
+    configs = sweep_configs(learn_params(args), grid)  # all valid before anything runs
     with executor(args):
-        runs = sweep(base, grid, seeds, Path(args.out) / "runs", log)
+        runs = sweep(configs, seeds, Path(args.out) / "runs", log)
     files = write_sweep(runs, Path(args.out))
     figure, summary = write_sweep_report(runs, args.seeds, Path(args.out))
     print(sweep_summary_markdown(runs))

@@ -57,17 +57,22 @@ def parse_grid(items: list[str]) -> dict[str, list[str]]:
     return grid
 
 
-def sweep(base: Params, grid: dict[str, list], seeds, store: Path, log=None) -> list[SweepRun]:
-    """Every combination of the grid's values (text or numbers) on top of `base`, learned on
-    `seeds`. Every configuration is validated before the first runs (ParamError). The units
-    (a configuration x a block of seeds) run on the current executor; a finished unit is stored
-    in `store` and not run again (an interrupted sweep resumes). log: see run_units."""
+def sweep_configs(base: Params, grid: dict[str, list]) -> list[tuple[dict, Params]]:
+    """Every combination of the grid's values (text or numbers) on top of `base`: (the swept
+    values, the parameters) each, all validated (ParamError)."""
     names = list(grid)
     configs = []
     for combination in itertools.product(*(grid[n] for n in names)):
         given = dict(zip(names, combination))
         p = params_from_strings({k: str(v) for k, v in given.items()}, base)
         configs.append(({n: getattr(p, n) for n in names}, p))
+    return configs
+
+
+def sweep(configs: list[tuple[dict, Params]], seeds, store: Path, log=None) -> list[SweepRun]:
+    """The configurations (sweep_configs) learned on `seeds`: their units (a configuration x a
+    block of seeds) run on the current executor; a finished unit is stored in `store` and not
+    run again (an interrupted sweep resumes). log: see run_units."""
     results = run_units([(p, seeds) for _, p in configs], "sweep", store, log=log,
                         keep=("steps",))
     return [SweepRun(values, p, np.asarray(seeds), result["steps"])
