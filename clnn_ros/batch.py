@@ -21,7 +21,8 @@ from pathlib import Path
 
 import numba
 import numpy as np
-from numba.extending import register_jitable
+from numba.core import types
+from numba.extending import intrinsic, register_jitable
 
 from .core import encoder, jitable, params, physics, random_stream, rln
 from .core.encoder import Encoder, encode_active
@@ -42,11 +43,193 @@ for _function, _options in jitable.MARKED:
 STALE = -1  # a cached decision made before the weights last changed
 
 
+# ---- one lane: one seed's episode, tick by tick ------------------------------------------------
+# A lane is a tuple of arrays: (weights, angles, steps_out, status_out, random_state) of its seed
+# and its own scratch (decisions, punish_tagged_at, reward_tagged_at, eligible, active,
+# responses). Its clock is a tuple of scalars: (x, x_dot, theta, theta_dot, t, trial, successes,
+# now). The setting, shared by all lanes: (constants, force, components, edges, offsets, radix,
+# max_steps, released, rule, learn).
+
+@register_jitable
+def _start_trial(lane, clock, setting):
+    """Trial clock[5] of the lane's seed begins (the core's begin_trial and reset)."""
+    weights, angles, _, _, rng, decisions, punish_tagged_at, reward_tagged_at, eligible, _, _ = lane
+    constants, _, _, _, _, _, _, released, rule, learn = setting
+    _, _, _, _, _, trial, successes, now = clock
+    restart_counters(punish_tagged_at, reward_tagged_at, eligible, rule)
+    if learn and rerandomize(weights, trial, rule, rng):
+        decisions[:, 0] = STALE
+    successes = trial_start_count(successes, rule)
+    x, x_dot, theta, theta_dot = trial_start_state(angles[trial], released, constants)
+    return x, x_dot, theta, theta_dot, np.int64(0), trial, successes, now
+
+
+@register_jitable
+def _start_seed(lane, setting):
+    """The clock of a seed's first trial; the lane's scratch as at the start of an episode."""
+    decisions, punish_tagged_at, reward_tagged_at, eligible = lane[5:9]
+    decisions[:, 0] = STALE
+    punish_tagged_at[:] = NEVER
+    reward_tagged_at[:] = NEVER
+    eligible[:] = 0
+    zero = np.int64(0)  # not the literal 0: the clock's type is that of a running lane's
+    return _start_trial(lane, (0.0, 0.0, 0.0, 0.0, zero, zero, zero, zero), setting)
+
+
+@register_jitable(forceinline=True)
+def _act(lane, clock, setting):
+    """The first part of a tick (the core's RLNAgent.infer and explore): the spiking inputs of
+    the lane's state and the acting neuron. Returns (neuron, the input pattern's number)."""
+    weights, rng, decisions, active, responses = lane[0], lane[4], lane[5], lane[9], lane[10]
+    _, _, components, edges, offsets, radix, _, _, rule, _ = setting
+    x, x_dot, theta, theta_dot = clock[:4]
+    encode_active((x, x_dot, theta, theta_dot), components, edges, offsets, active)
+    pattern = 0  # mixed-radix number of the spiking inputs
+    for v in range(active.shape[0]):
+        pattern = pattern * radix[v] + active[v] - offsets[v]
+    # The decision for an input pattern depends on the weights only (but for random ties, which
+    # draw anew on every tie): it is cached per pattern, and made again when the pattern comes
+    # back after a change of the weights.
+    if decisions[pattern, 0] == STALE or rule.tie_break == TIE_RANDOM:
+        decisions[pattern] = infer(weights, active, rule, rng, responses)
+    return explore(decisions[pattern, 0], rule, rng), pattern
+
+
+@register_jitable(forceinline=True)
+def _step(clock, neuron, setting):
+    """The physics step of a tick: (x, x_dot, theta, theta_dot, status)."""
+    constants, force = setting[:2]
+    x, x_dot, theta, theta_dot = clock[:4]
+    return cartpole_step(x, x_dot, theta, theta_dot, force if neuron == 1 else -force, constants)
+
+
+@register_jitable(forceinline=True)
+def _learn(lane, clock, setting, neuron, pattern, stepped):
+    """The rest of a tick, after its physics step `stepped` (the core's RLNAgent.act's tagging,
+    the success counter and RLNAgent.learn); at the end of a trial its results are written and
+    the next trial begins. Returns (clock, whether the seed is done)."""
+    (weights, angles, steps_out, status_out, _, decisions, punish_tagged_at, reward_tagged_at,
+     eligible, active, _) = lane
+    max_steps, rule, learn = setting[6], setting[8], setting[9]
+    t, trial, successes, now = clock[4:]
+    x, x_dot, theta, theta_dot, status = stepped
+    # Tagged after the step (it reads nothing the step writes): the step's long chain of
+    # dependent operations, which the next tick waits for, starts the earliest.
+    tag_action_path(punish_tagged_at, reward_tagged_at, eligible, neuron,
+                    (decisions[pattern, 1], decisions[pattern, 2]), active, now, rule)
+    kind, successes = outcome(successes, status != CONTINUE, rule)
+    if learn:
+        now = update(kind, weights, punish_tagged_at, reward_tagged_at, eligible, active, now,
+                     rule)
+        if kind != NONE:
+            decisions[:, 0] = STALE
+    ended = status != CONTINUE
+    if not ended:
+        t += 1
+        ended = t >= max_steps
+    done = False
+    if ended:
+        steps_out[trial] = t
+        status_out[trial] = status
+        trial += 1
+        done = trial == angles.shape[0]
+        if not done:
+            x, x_dot, theta, theta_dot, t, trial, successes, now = _start_trial(
+                lane, (x, x_dot, theta, theta_dot, t, trial, successes, now), setting)
+    return (x, x_dot, theta, theta_dot, t, trial, successes, now), done
+
+
+@numba.njit(cache=True, _nrt=False)
+def _tick(lane_a, clock_a, lane_b, clock_b, setting, both):
+    """Lane a ticks, and with `both` lane b too, until one of their seeds is done: returns
+    (clock_a, whether a's seed is done, clock_b, whether b's is). The two lanes' ticks take
+    turns part by part: a tick waits mostly on its physics step's chain of dependent operations,
+    and the other lane's step, next to it, runs in that wait."""
+    done_a = done_b = False
+    neuron_b, pattern_b, stepped_b = 0, 0, (0.0, 0.0, 0.0, 0.0, 0)
+    while not (done_a or done_b):
+        neuron_a, pattern_a = _act(lane_a, clock_a, setting)
+        if both:
+            neuron_b, pattern_b = _act(lane_b, clock_b, setting)
+        stepped_a = _step(clock_a, neuron_a, setting)
+        if both:
+            stepped_b = _step(clock_b, neuron_b, setting)
+        clock_a, done_a = _learn(lane_a, clock_a, setting, neuron_a, pattern_a, stepped_a)
+        if both:
+            clock_b, done_b = _learn(lane_b, clock_b, setting, neuron_b, pattern_b, stepped_b)
+    return clock_a, done_a, clock_b, done_b
+
+
+@intrinsic
+def _take_next(typingctx, counter):
+    """counter[0] += 1, atomically; returns the value before (a shared work queue's next item)."""
+    if not (isinstance(counter, types.Array) and counter.dtype == types.int64):
+        return None
+
+    def codegen(context, builder, signature, args):
+        array = context.make_array(signature.args[0])(context, builder, args[0])
+        return builder.atomic_rmw("add", array.data, context.get_constant(types.int64, 1),
+                                  "seq_cst")
+    return types.int64(counter), codegen
+
+
+@register_jitable
+def _lane(k, episodes, scratch):
+    """The lane that runs seed k (row k of the episodes' arrays) in this scratch."""
+    weights, angles, steps_out, status_out, rng = episodes
+    decisions, punish_tagged_at, reward_tagged_at, eligible, active, responses = scratch
+    return (weights[k], angles[k], steps_out[k], status_out[k], rng[k], decisions,
+            punish_tagged_at, reward_tagged_at, eligible, active, responses)
+
+
 @numba.njit(cache=True)
-def run_episode_kernel(weights, angles, constants, force, components, edges, offsets, max_steps,
-                       released, rule, learn, rng, steps_out, status_out):
-    """One episode in place: `weights` end as the final weights, per-trial results in the outputs."""
-    n_segments, n_inputs = weights.shape[1], weights.shape[2]
+def _scratch(n_patterns, n_segments, n_inputs, n_vars):
+    """A lane's own arrays: (decisions, punish_tagged_at, reward_tagged_at, eligible, active,
+    responses)."""
+    return (np.empty((n_patterns, 3), np.int64), np.empty((2, n_segments, n_inputs), np.int64),
+            np.empty((2, n_segments), np.int64), np.empty((2, n_segments, n_inputs), np.uint8),
+            np.empty(n_vars, np.int64), response_space(n_segments))
+
+
+# No reference counting in the tick loop: it would cost more than the tick's own work. All the
+# arrays it uses are made by _run_many.
+@numba.njit(cache=True, _nrt=False)
+def _work(taken, episodes, setting, scratch_a, scratch_b):
+    """One thread's work: seeds from the shared queue `taken`, two at a time (lanes a and b, each
+    with its scratch), until the queue is empty."""
+    n_seeds = episodes[0].shape[0]
+    k_a, k_b = _take_next(taken), _take_next(taken)
+    clock_a = clock_b = (0.0, 0.0, 0.0, 0.0, np.int64(0), np.int64(0), np.int64(0), np.int64(0))
+    if k_a < n_seeds:
+        clock_a = _start_seed(_lane(k_a, episodes, scratch_a), setting)
+    if k_b < n_seeds:
+        clock_b = _start_seed(_lane(k_b, episodes, scratch_b), setting)
+    while k_a < n_seeds:
+        both = k_b < n_seeds
+        clock_a, done_a, clock_b, done_b = _tick(
+            _lane(k_a, episodes, scratch_a), clock_a,
+            _lane(k_b if both else k_a, episodes, scratch_b), clock_b, setting, both)
+        if done_a:
+            k_a = _take_next(taken)
+            if k_a < n_seeds:
+                clock_a = _start_seed(_lane(k_a, episodes, scratch_a), setting)
+        if done_b:
+            k_b = _take_next(taken)
+            if k_b < n_seeds:
+                clock_b = _start_seed(_lane(k_b, episodes, scratch_b), setting)
+        if k_a >= n_seeds:  # lane a idle: b, if it still runs, goes on alone as lane a
+            k_a, k_b, clock_a, clock_b = k_b, k_a, clock_b, clock_a
+            scratch_a, scratch_b = scratch_b, scratch_a
+
+
+@numba.njit(parallel=True, cache=True)
+def _run_many(weights, angles, constants, force, components, edges, offsets, max_steps,
+              released, rule, learn, rng, steps_out, status_out, n_threads):
+    """Every seed's episode in place: `weights` end as the final weights, per-trial results in
+    the outputs."""
+    n_seeds, n_segments, n_inputs = weights.shape[0], weights.shape[2], weights.shape[3]
+    if n_seeds == 0 or angles.shape[1] == 0:
+        return
     n_vars = components.shape[0]
     radix = np.empty(n_vars, dtype=np.int64)  # inputs per variable
     for v in range(n_vars):
@@ -54,69 +237,16 @@ def run_episode_kernel(weights, angles, constants, force, components, edges, off
     n_patterns = 1
     for v in range(n_vars):
         n_patterns *= radix[v]
-    _run_trials(weights, angles, constants, force, components, edges, offsets, max_steps,
-                released, rule, learn, rng, steps_out, status_out, radix,
-                np.empty((n_patterns, 3), np.int64),
-                np.full((2, n_segments, n_inputs), NEVER, np.int64),
-                np.full((2, n_segments), NEVER, np.int64),
-                np.zeros((2, n_segments, n_inputs), np.uint8), np.empty(n_vars, np.int64),
-                response_space(n_segments))
-
-
-# No reference counting in the tick loop: it would cost more than the tick's own work. All the
-# arrays it uses are made by run_episode_kernel.
-@numba.njit(cache=True, _nrt=False)
-def _run_trials(weights, angles, constants, force, components, edges, offsets, max_steps,
-                released, rule, learn, rng, steps_out, status_out, radix, decisions,
-                punish_tagged_at, reward_tagged_at, eligible, active, responses):
-    # The decision for an input pattern depends on the weights only (but for random ties, which
-    # draw anew on every tie): it is cached per pattern, and made again when the pattern comes
-    # back after a change of the weights.
-    use_cache = rule.tie_break != TIE_RANDOM
-    decisions[:, 0] = STALE
-    now = 0  # the clock of the decay counters
-    successes = 0
-    for trial in range(angles.shape[0]):
-        restart_counters(punish_tagged_at, reward_tagged_at, eligible, rule)
-        if learn and rerandomize(weights, trial, rule, rng):
-            decisions[:, 0] = STALE
-        successes = trial_start_count(successes, rule)
-        x, x_dot, theta, theta_dot = trial_start_state(angles[trial], released, constants)
-        t = 0
-        status = CONTINUE
-        while t < max_steps:
-            encode_active((x, x_dot, theta, theta_dot), components, edges, offsets, active)
-            pattern = 0  # mixed-radix number of the spiking inputs
-            for v in range(active.shape[0]):
-                pattern = pattern * radix[v] + active[v] - offsets[v]
-            if decisions[pattern, 0] == STALE or not use_cache:
-                decisions[pattern] = infer(weights, active, rule, rng, responses)
-            neuron, s0, s1 = decisions[pattern, 0], decisions[pattern, 1], decisions[pattern, 2]
-            neuron = explore(neuron, rule, rng)
-            tag_action_path(punish_tagged_at, reward_tagged_at, eligible, neuron, (s0, s1),
-                            active, now, rule)
-            x, x_dot, theta, theta_dot, status = cartpole_step(
-                x, x_dot, theta, theta_dot, force if neuron == 1 else -force, constants)
-            kind, successes = outcome(successes, status != CONTINUE, rule)
-            if learn:
-                now = update(kind, weights, punish_tagged_at, reward_tagged_at, eligible, active,
-                             now, rule)
-                if kind != NONE:
-                    decisions[:, 0] = STALE
-            if status != CONTINUE:
-                break
-            t += 1
-        steps_out[trial] = t
-        status_out[trial] = status
-
-
-@numba.njit(parallel=True, cache=True)
-def _run_many(weights, angles, constants, force, components, edges, offsets, max_steps,
-              released, rule, learn, rng, steps_out, status_out):
-    for k in numba.prange(weights.shape[0]):
-        run_episode_kernel(weights[k], angles[k], constants, force, components, edges, offsets,
-                           max_steps, released, rule, learn, rng[k], steps_out[k],
-                           status_out[k])
+    # Seeds run for very different times (a seed stuck in a local optimum fails in few steps):
+    # each thread takes the next seed not yet taken whenever one of its lanes is free, so that
+    # the threads end together, whatever the seeds' lengths and their order.
+    taken = np.zeros(1, np.int64)
+    for _ in numba.prange(min(n_threads, n_seeds)):
+        _work(taken, (weights, angles, steps_out, status_out, rng),
+              (constants, force, components, edges, offsets, radix, max_steps, released, rule,
+               learn),
+              _scratch(n_patterns, n_segments, n_inputs, n_vars),
+              _scratch(n_patterns, n_segments, n_inputs, n_vars))
 
 
 def _drop_stale_cache() -> None:
@@ -133,7 +263,7 @@ def _drop_stale_cache() -> None:
     try:
         if stamp.exists() and stamp.read_text() == digest:
             return
-        for dispatcher in (_run_many, run_episode_kernel, _run_trials):
+        for dispatcher in (_run_many, _scratch, _work, _tick):
             dispatcher._cache.flush()
         stamp.parent.mkdir(parents=True, exist_ok=True)
         stamp.write_text(digest)
@@ -190,7 +320,7 @@ def run_batch(seeds, p: Params, weights: np.ndarray | None = None, angles: np.nd
     start = time.perf_counter()
     _run_many(all_weights, all_angles, physics_constants(p), float(p.force), components, edges,
               offsets, p.max_steps, p.first_action == "no_force", Rule.from_params(p), learn, rng,
-              steps, status)
+              steps, status, numba.get_num_threads())
     wall = time.perf_counter() - start
     return BatchResult(seeds, all_angles, steps, status, all_weights, wall)
 

@@ -74,7 +74,7 @@ class Encoder:
         return vector
 
 
-@jitable
+@jitable(inline="always")  # on every tick of the batch engine: inlined into its tick loop
 def encode_active(state, components, edges, offsets, out):
     """Write into `out` the index of the spiking input of each encoded variable: the interval is
     the number of interior edges <= value (lower-inclusive intervals)."""

@@ -228,11 +228,12 @@ def tag_action_path(punish_tagged_at, reward_tagged_at, eligible, neuron, segmen
                     rule):
     """Tag the winning segment of the winning neuron (`segments`: each neuron's dendrite winner);
     with tagging="both_neurons" also the other neuron's."""
-    tag_segment(punish_tagged_at, reward_tagged_at, eligible, neuron, segments[neuron], active,
-                now)
+    # segments[neuron] as a choice between two values: compiled, a tuple indexed by a variable
+    # is a jump table, mispredicted whenever the action changes
+    winner, other = (segments[1], segments[0]) if neuron == 1 else (segments[0], segments[1])
+    tag_segment(punish_tagged_at, reward_tagged_at, eligible, neuron, winner, active, now)
     if rule.tag_both:
-        tag_segment(punish_tagged_at, reward_tagged_at, eligible, 1 - neuron,
-                    segments[1 - neuron], active, now)
+        tag_segment(punish_tagged_at, reward_tagged_at, eligible, 1 - neuron, other, active, now)
 
 
 # ---- the update after the step (section 2.3, Figure 6) -----------------------------------------
