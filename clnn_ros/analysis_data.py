@@ -84,8 +84,8 @@ def read_bag(path: Path, salvage: bool):
             elif topic in ticks:
                 tick = sim_ns // tau_ns
                 ticks[topic].append(tick)
-                if topic in raw:
-                    raw[topic][tick] = data
+                if topic in raw:  # the first of a tick: a second one is a stale or forged copy
+                    raw[topic].setdefault(tick, data)
                     schemas[topic] = schema
     return dict(params=params, given=given, record=record, events=events, weights=weights,
                 ticks=ticks, raw=raw, schemas=schemas, counts=counts, decode=decode,
@@ -146,7 +146,7 @@ def trial_series(data, trial: int):
     labels = input_labels(data)
     spikes = np.zeros((len(labels), len(ticks)), dtype=np.uint8)
     for k, vector in enumerate(messages(SPIKES)):
-        if vector is not None:
+        if vector is not None and len(vector.spikes) == len(labels):  # else not the graph's
             spikes[:, k] = np.frombuffer(bytes(vector.spikes), np.uint8)
     last = states[-1]
     return TrialSeries(

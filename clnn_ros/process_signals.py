@@ -1,4 +1,4 @@
-"""SIGINT and SIGTERM recorded instead of raised, for every process of the graph and run_all: a
+"""SIGINT, SIGTERM and SIGHUP recorded instead of raised, for every process of the graph and run_all: a
 loop then ends between two steps, never inside one (a publish on a context that is shutting down
 fails; a half-written file). No ROS import."""
 
@@ -12,13 +12,15 @@ import threading
 # run_all gives each child a pipe on stdin that it never writes to: end of file means run_all
 # is gone (even killed with SIGKILL), and the child stops as on SIGTERM.
 EXIT_WITH_STDIN = "CLNN_ROS_EXIT_WITH_STDIN"
+# What stops a run cleanly, its results kept: Ctrl-C, a kill, a closed terminal.
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 def catch_signals() -> list[int]:
     """The signals received so far (a list that grows). With EXIT_WITH_STDIN set, the end of
     stdin counts as SIGTERM."""
     received = []
-    for signum in (signal.SIGINT, signal.SIGTERM):
+    for signum in STOP_SIGNALS:
         signal.signal(signum, lambda number, _frame: received.append(number))
     if os.environ.get(EXIT_WITH_STDIN) == "1":
         def watch_stdin() -> None:

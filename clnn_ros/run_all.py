@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import json
 import shlex
 import shutil
 import signal
@@ -36,10 +37,11 @@ from .core.checkpoint import Checkpoint, load_checkpoint
 from .core.params import STATE_NAMES, ParamError, Params
 from .core.presets import PRESETS
 from .files import cannot_create
-from .graph.names import NOT_STARTED, RECORDER, TRIAL_MANAGER, namespace_problem
+from .graph.names import NOT_STARTED, PER_TICK, RECORDER, TRIAL_MANAGER, namespace_problem
 from .graph.run import DEMO, ENVIRONMENTS, OWN_TAU, RUN_SETTINGS, default_bag_path, run_values
+from .graph.ticks import TICKS_RECORD, TickRanges, describe_ranges
 from .init_weights import OPTIMAL, episode_start
-from .process_signals import catch_signals
+from .process_signals import STOP_SIGNALS, catch_signals
 from .supervise import (NODES, Supervisor, fresh_summary, report_failure, run_separate, say,
                         start_recorder, stop_recorder)
 
@@ -90,6 +92,10 @@ def parse_args(argv):
                         help="seconds without progress before the graph is declared stalled "
                              f"(default {RUN_SETTINGS['stall_timeout_s']:g})")
     parser.add_argument("--quiet", action="store_true", help="no per-trial progress lines")
+    parser.add_argument("--allow-foreign-publishers", action="store_true",
+                        help="a publisher on a graph topic other than the graph's node (forged "
+                             "messages) is named and the run goes on, its results reported as "
+                             "tainted (exit status 1); without: it ends the run")
     parser.add_argument("--bag", type=Path, help="record every topic into this bag directory "
                         "(DIR/metadata.yaml, DIR/DIR_0.mcap; an earlier bag there is replaced; "
                         "default: <out>/bag with --out, else bags/run_<UTC time>)")
@@ -167,6 +173,8 @@ def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
         ("stall_timeout_s", args.stall_timeout)) if value is not None}
     if args.quiet:
         flags["progress"] = False
+    if args.allow_foreign_publishers:
+        flags["allow_foreign_publishers"] = True
     if args.init_weights:  # the nodes get a file by its full path
         flags["init_weights"] = args.init_weights if args.init_weights in OPTIMAL else \
             str(Path(args.init_weights).resolve())
@@ -282,24 +290,47 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
         with contextlib.suppress(OSError):
             bag_path.rmdir()  # empty: created here to check it could be; nothing was recorded
         print(f"run_all: bag {bag_path}" if bag_path.exists() else
-              f"run_all: nothing recorded, no bag", flush=True)
+              "run_all: nothing recorded, no bag", flush=True)
+        if summary.get("exit_reason") == "completed" and \
+                (bag_path / bag.METADATA_FILE).is_file() and \
+                (lacking := bag_lacks(bag_path, summary["ticks"])):
+            say(f"run_all: warning: the bag lacks {lacking} (the run's ticks: 0-"
+                f"{summary['ticks'] - 1}, as in trials.csv)")
         if recorder_forced and bag_path.exists() and \
                 not (bag_path / bag.METADATA_FILE).is_file():  # else its own lines said so
             say(f"run_all: warning: the recorder had to be stopped before it finished the bag: "
                 f"python -m clnn_ros.bag repair {bag_path}")
     if failed:
         return 1
-    if status in (128 + signal.SIGINT, 128 + signal.SIGTERM):
+    if status in (128 + signum for signum in STOP_SIGNALS):
         say("run_all: interrupted")
         return status
     if status == NOT_STARTED and bag_path is not None:
         bag.remove_bag(bag_path)  # what it holds is another graph's
-    if status != 0:
+    if status == 0 and summary.get("exit_reason") == "interrupted":
+        status, reason = 1, "the trial manager was stopped by a signal from outside run_all"
+    elif status != 0:
         reason = summary.get("exit_reason") or reason or \
             f"the trial manager exited with status {status}"
+    if status != 0:
         say(f"run_all: error: {reason}")
         return 1
     return 0
+
+
+def bag_lacks(bag_path: Path, ticks: int) -> str:
+    """The ticks of a finished bag's per-tick topics that the run had and the bag lacks, as the
+    recorder noted them (graph.ticks), in one phrase; '' if it lacks none."""
+    try:
+        record = bag.metadata(bag_path, TICKS_RECORD) or {}
+    except bag.BagError as error:
+        return f"a readable record of its ticks ({error})"
+    lacking = []
+    for topic in PER_TICK:
+        gaps = TickRanges(json.loads(record.get(topic, "[]"))).missing(0, ticks - 1)
+        if gaps:
+            lacking.append(f"ticks {describe_ranges(gaps)} of {topic}")
+    return "; ".join(lacking)
 
 
 def announce(args, values: dict, checkpoint, namespace: str) -> None:

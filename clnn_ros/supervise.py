@@ -230,7 +230,8 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
                  interrupted: list[int], began: float) -> tuple[int, bool]:
     """Start the nodes (env_command None: no environment) and watch them until the trial
     manager ends. Returns (its exit status, or 128 + signal; whether run_all saw a process fail
-    itself, and said so: one that exited with an error or a signal)."""
+    itself, and said so: one that exited with an error or a signal, or that someone else
+    stopped before the episode ended)."""
     arguments = node_arguments(write_params(workdir / "params.yaml", values), namespace)
     for name in NODES:
         command = env_command if name == "environment" else \
@@ -238,12 +239,20 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
         if command is not None:
             supervisor.start(name, [*command, *arguments], child_environment())
     manager = supervisor.children[TRIAL_MANAGER]
-    failure, ended_at, outcome, status = None, None, None, None
+    failure, ended_at, outcome, status, quit_at = None, None, None, None, None
     while manager.returncode is None and not interrupted:
         if failure := supervisor.first_failure(exclude={TRIAL_MANAGER}):
             break
         if ended_at is None and (outcome := fresh_summary(Path(values["out_dir"]), began)):
             ended_at = time.monotonic()  # the episode is over and its results written
+        # A node ends with status 0 after the episode's end, or when someone else stopped it
+        # (SIGINT, SIGTERM): then the trial manager, which has not ended, never will.
+        quitter = next((c for name, c in supervisor.children.items()
+                        if name in NODES and c.returncode == 0), None)
+        quit_at = (quit_at or time.monotonic()) if quitter and ended_at is None else None
+        if quit_at is not None and time.monotonic() - quit_at > SHUTDOWN_GRACE_S:
+            failure = quitter
+            break
         if ended_at is not None and time.monotonic() - ended_at > SHUTDOWN_GRACE_S:
             # Its DDS participant hangs in deletion (seen once: Fast DDS 2.14's
             # DomainParticipant::set_listener spins while a discovery callback waits for a lock

@@ -57,7 +57,7 @@ from rosgraph_msgs.msg import Clock
 
 from clnn_ros.core.params import ParamError, Params
 from clnn_ros.graph import qos
-from clnn_ros.graph.content import RULES, network_action_problem
+from clnn_ros.graph.content import RULES
 from clnn_ros.graph.names import (ACTION, CLOCK, GRAPH_NODES, REWARD, SPIKES, STATE, TRIAL_EVENT,
                                   TRIAL_MANAGER, WEIGHTS)
 from clnn_ros.rclpy_session import make_executor, qos_profile, ros_session
@@ -76,9 +76,9 @@ SUBSCRIBERS = {CLOCK: ["environment"], TRIAL_EVENT: ["environment", "encoder", "
 # Who else hears a topic: the sim-time clock (use_sim_time) of every node but the trial manager
 # subscribes to /clock; the fuzzer itself listens to clock and trial/event.
 OTHER_SUBSCRIPTIONS = {CLOCK: len(GRAPH_NODES) + 1, TRIAL_EVENT: 1}
-# What every subscriber of a topic refuses for its content: the topic's rule, and of an action
-# its winner too (docs/ROS_GRAPH.md, "What a node refuses": environment and trial manager).
-REFUSED = {**RULES, ACTION: network_action_problem}
+# What every subscriber of a topic refuses for its content (docs/ROS_GRAPH.md, "What a node
+# refuses").
+REFUSED = RULES
 
 
 class Fuzzer(Node):

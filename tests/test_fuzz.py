@@ -53,6 +53,14 @@ def refusal_summaries(stderr: str) -> Counter:
     return counts
 
 
+def first_foreign(logged: str) -> str:
+    """The topic of the trial manager's one warning of a foreign publisher."""
+    found = re.findall(r"a foreign publisher on (\S+): node 'fuzz_graph' in namespace /: the run "
+                       r"goes on", logged)
+    assert len(found) == 1, logged[-2000:]
+    return found[0]
+
+
 @pytest.mark.parametrize("composed", [False, True], ids=["processes", "composed"])
 def test_every_fuzz_message_is_refused_and_the_episode_equals_the_core(tmp_path, composed):
     env = {**os.environ, "ROS_DOMAIN_ID": DOMAIN_ID, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
@@ -75,7 +83,8 @@ def test_every_fuzz_message_is_refused_and_the_episode_equals_the_core(tmp_path,
         graph = subprocess.Popen(
             [sys.executable, "-m", "clnn_ros.run_all", "--quiet", "--no-record", "--seed",
              str(seed), "--trials", str(trials), "--max-steps", str(max_steps), "--out",
-             str(tmp_path), *(["--composed"] if composed else [])], env=env,
+             str(tmp_path), "--allow-foreign-publishers", *(["--composed"] if composed else [])],
+            env=env,
             stdout=subprocess.DEVNULL, stderr=stderr)
     try:
         deadline = time.monotonic() + EPISODE_HANG_S
@@ -94,8 +103,12 @@ def test_every_fuzz_message_is_refused_and_the_episode_equals_the_core(tmp_path,
     assert not left, sorted(left)
     assert fuzzer.returncode == 0, fuzz_errors
     logged = graph_log.read_text()
-    assert graph.returncode == 0, logged[-2000:]
-    assert not problem_lines(logged), logged[-2000:]  # each node took the real EPISODE_END
+    # The fuzzer is a foreign publisher: named, the run goes on (as asked) and ends tainted,
+    # never "completed"; each node took the real EPISODE_END.
+    assert graph.returncode == 1, logged[-2000:]
+    assert problem_lines(logged) == [
+        f"run_all: error: tainted: a foreign publisher on {report_topic}: node 'fuzz_graph' in "
+        f"namespace /" for report_topic in [first_foreign(logged)]], logged[-2000:]
     report = json.loads(report_path.read_text())
 
     for topic, sent in report["sent"].items():

@@ -15,6 +15,7 @@ import yaml
 from builtin_interfaces.msg import Time
 
 from clnn_ros.graph import names
+from clnn_ros.graph.run import RUN_SETTINGS
 from clnn_ros.markers import CART, CART_SIZE_M, FRAME, NAMESPACE, POLE, TRACK, CartPoleMarkers
 
 from conftest import HANG_S, free_domain_id, ros_environment
@@ -126,7 +127,7 @@ def test_markers_every_kth_tick_decoded_by_mcap_ros2(ros_env, tmp_path):
     schema in the bag holds its whole definition chain (Marker, Header, Pose, CompressedImage,
     MeshFile, ...), which mcap_ros2 decodes it with."""
     from mcap_ros2.reader import read_ros2_messages
-    period = names.RUN_SETTINGS["marker_period_ticks"]
+    period = RUN_SETTINGS["marker_period_ticks"]
     assert period > 1
     run_all(ros_env, tmp_path, "--trials", "1")
     path = tmp_path / "bag" / "bag_0.mcap"

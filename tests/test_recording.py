@@ -553,7 +553,7 @@ def test_sigterm_stops_a_recorder_that_recorded_nothing(ros_env, tmp_path):
     time.sleep(0.5)
     process.send_signal(signal.SIGTERM)
     stdout, stderr = process.communicate(timeout=20)
-    assert process.returncode == 143 and "Traceback" not in stderr, stderr
+    assert process.returncode == 0 and "Traceback" not in stderr, stderr  # a requested stop
     assert f"recorder: nothing recorded: {path} removed" in stdout and not path.exists()
     missing = subprocess.run([sys.executable, "-m", "clnn_ros.nodes.recorder"], env=ros_env,
                              capture_output=True, text=True, timeout=20)

@@ -29,7 +29,7 @@ rclpy. The names below are those the recorder, run_all, echo and analyze use.
 """
 
 from .directory import METADATA_FILE, foreign_files, remove_bag
-from .reader import BagError, Decoder, iter_raw, mcap_file, open_bag, stamp_ns
+from .reader import BagError, Decoder, iter_raw, mcap_file, metadata, open_bag, stamp_ns
 from .schemas import message_class, schema_text, type_hash
 from .writer import CHUNK_SECONDS, BagWriter, qos_dicts
 

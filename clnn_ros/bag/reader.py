@@ -124,3 +124,11 @@ class Decoder:
         if decoder is None:
             decoder = self.decoders[schema.id] = self.factory.decoder_for("cdr", schema)
         return decoder(cdr)
+
+
+def metadata(path, name: str) -> dict | None:
+    """A finished bag's metadata record `name` (None if it has none)."""
+    reader, stream = open_bag(path)
+    with stream:
+        return next((dict(record.metadata) for record in reader.iter_metadata()
+                     if record.name == name), None)

@@ -76,14 +76,6 @@ def action_problem(msg, p: Params) -> str | None:
         return f"force_direction {msg.force_direction} is not -1, 0 or 1"
     if msg.force_n != msg.force_direction * p.force:
         return f"force_n {msg.force_n} is not force_direction x force ({p.force:g} N)"
-    return None
-
-
-def network_action_problem(msg, p: Params) -> str | None:
-    """The action's winner, for a subscriber that knows the network (the environment does not
-    need to)."""
-    if problem := action_problem(msg, p):
-        return problem
     if msg.winning_neuron >= N_NEURONS or msg.winning_segment >= p.n_segments:
         return f"winning neuron {msg.winning_neuron} / segment {msg.winning_segment} does not " \
                f"exist ({N_NEURONS} neurons x {p.n_segments} segments)"
@@ -100,7 +92,7 @@ def weights_problem(msg, p: Params) -> str | None:
     return None
 
 
-# Each topic's rule; the trial manager, which knows the network, checks actions' winners too.
+# Each topic's rule.
 RULES = {CLOCK: clock_problem, TRIAL_EVENT: event_problem, STATE: state_problem,
          SPIKES: spikes_problem, REWARD: reward_problem, ACTION: action_problem,
          WEIGHTS: weights_problem}

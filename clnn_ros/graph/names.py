@@ -47,7 +47,7 @@ NOT_STARTED = 3
 # Who publishes what within a tick, in causal order.
 PUBLISHED_BY = {CLOCK: TRIAL_MANAGER, TRIAL_EVENT: TRIAL_MANAGER, STATE: "environment",
                 SPIKES: "encoder", REWARD: "reward", ACTION: "agent", WEIGHTS: "agent",
-                INPUT_LABELS: "encoder"}
+                INPUT_LABELS: "encoder", MARKERS: "environment"}
 
 
 def absolute(topic: str, namespace: str = "/") -> str:

@@ -22,7 +22,8 @@ from .names import RECORDER, TRIAL_MANAGER, clock_remappings
 # Settings of a run that are not model parameters, with their defaults.
 RUN_SETTINGS = {"seed": 0, "stall_timeout_s": 5.0, "out_dir": "", "progress": True,
                 "extra_nodes": "", "external_nodes": "", "init_weights": "",
-                "marker_period_ticks": 5, "simulator": "cartpole"}
+                "marker_period_ticks": 5, "simulator": "cartpole",
+                "allow_foreign_publishers": False}
 # The simulators the project's environment node runs (its setting `simulator`), and external:
 # none is started, one started by someone else is waited for (docs/ENV_CONTRACT.md).
 SIMULATORS = ("cartpole", "gymnasium", "mujoco")
@@ -55,20 +56,22 @@ COMMON = ("tau", "extra_nodes")
 # A resumed episode (init_weights: a checkpoint) is checked against the node's own parameters.
 RESUME = ("seed", "init_weights", "trials")
 NODE_PARAMETERS = {
+    # segments: an action's winner must exist in the network (graph.content.action_problem)
     "environment": (*COMMON, *PHYSICS_PARAMETERS, "max_steps", "marker_period_ticks",
-                    "simulator"),
+                    "simulator", "segments"),
     "encoder": (*COMMON, *ENCODING, *STATE_RULE),
     "reward": (*COMMON, *STATE_RULE, "sigma", "success_counter", *RESUME),
     "agent": (*COMMON, *NETWORK, *LEARNING, "force", *RESUME, "out_dir"),
     TRIAL_MANAGER: (*COMMON, *NETWORK, *STATE_RULE, *RESUME, "force", "w_max", "n_angles",
                     "angle_span_deg", "stall_timeout_s", "out_dir", "progress",
-                    "external_nodes"),
+                    "external_nodes", "allow_foreign_publishers"),
 }
 # What the run's params file always holds, at its effective value, for an environment node of
 # someone else's: the parameters of docs/ENV_CONTRACT.md's table (tests/test_env_contract.py
 # holds them equal). Not extra_nodes (the run sets it), nor simulator (the project's node's own
 # setting: an --env-node command's -p simulator:=... must not be overridden).
-ENVIRONMENT_GIVEN = ("tau", *PHYSICS_PARAMETERS, "max_steps", "marker_period_ticks")
+ENVIRONMENT_GIVEN = ("tau", *PHYSICS_PARAMETERS, "max_steps", "marker_period_ticks",
+                     "segments")
 # The recorder keeps every value of the run in its bag.
 NODE_PARAMETERS[RECORDER] = tuple(sorted({*Params().to_dict(), *RUN_SETTINGS}))
 
@@ -145,6 +148,9 @@ DESCRIPTIONS = {
     "marker_period_ticks": ("the environment draws the cart-pole on cartpole/markers (a 3D "
                             "view) at every tick that is a multiple of this; 0: never",
                             (0, 2**32 - 1)),
+    "allow_foreign_publishers": ("a publisher on a graph topic that is not the graph's node "
+                                 "(forged messages) ends the run (false), or is named and the "
+                                 "run goes on, its results reported as tainted (true)", None),
     "simulator": ("what the environment node simulates: cartpole (the core's physics, as the "
                   "model parameters say), gymnasium (CartPole-v1's own constants) or mujoco "
                   "(a MuJoCo plant with gymnasium's constants)", SIMULATORS),
@@ -261,7 +267,7 @@ def run_values(defaults: dict, preset: str | None = None, params_file: Path | No
     for key in set(values) & set(RUN_SETTINGS):
         values[key] = convert_setting(key, values[key])
     # An environment node of someone else's knows no defaults of ours: the physics as numbers.
-    model = params.to_dict()
+    model = {**params.to_dict(), "segments": params.n_segments}  # the count in use, not None
     for name in ENVIRONMENT_GIVEN:
         if name not in values:
             value = model[name] if name in model else RUN_SETTINGS[name]

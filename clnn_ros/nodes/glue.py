@@ -82,11 +82,10 @@ def given_parameters(argv: list[str]) -> dict:
     return values
 
 
-def checked(topic: str, params: Params, refusals: Refusals, callback: Callable,
-            rule: Callable | None = None):
+def checked(topic: str, params: Params, refusals: Refusals, callback: Callable):
     """A subscription callback: a message goes to `callback` only if it keeps the topic's
-    content rule (graph.content.RULES, or `rule`); otherwise it is refused."""
-    rule = rule or RULES[topic]
+    content rule (graph.content.RULES); otherwise it is refused."""
+    rule = RULES[topic]
 
     def receive(msg) -> None:
         reason = rule(msg, params)
@@ -176,7 +175,7 @@ def run_node(make_node: Callable[[dict], Node], argv: list[str] | None = None,
     node has `finished` (a Future of its exit status), `failure` (None, or why it failed: a
     full disk) and `refusals` (graph.lockstep.Refusals). Bad parameters: one error line, exit
     2. A failure: one line, exit 1. SIGINT/SIGTERM: `on_interrupt(node)`, then a clean
-    shutdown, 128 + the signal."""
+    shutdown, exit 0."""
     argv = sys.argv if argv is None else argv
     prog = os.path.basename(argv[0])
     unexpected = split_ros_arguments(argv)[1][1:]
@@ -192,10 +191,10 @@ def run_node(make_node: Callable[[dict], Node], argv: list[str] | None = None,
             return 2
         try:
             spin_until_finished([node], node.finished, signals)
-            if signals:
+            if signals:  # a requested shutdown is no failure (as ROS 2's own nodes)
                 if on_interrupt is not None:
                     on_interrupt(node)
-                return 128 + signals[0]
+                return 0
             if node.failure:
                 print(f"{prog}: error: {node.failure}", file=sys.stderr, flush=True)
             return node.finished.result()

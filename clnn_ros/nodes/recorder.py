@@ -18,7 +18,7 @@ Ctrl-C, on SIGTERM and when run_all goes away. A chunk goes to the file half a s
 first message (bag.CHUNK_SECONDS), so a SIGKILL loses at most that; `python -m clnn_ros.bag repair`
 then makes a finished copy. A bag that holds no message is removed. The run's parameters are stored
 in the bag's `clnn_ros` metadata record, with the environment node (parameter `environment`).
-Exit status 0, 130/143 after a signal, 2 for bad parameters, 1 if the bag cannot be written (a
+Exit status 0 (also after SIGINT/SIGTERM: a requested stop), 2 for bad parameters, 1 if the bag cannot be written (a
 full disk: one line).
 """
 
@@ -44,6 +44,7 @@ from ..graph import qos
 from ..graph.names import (CLOCK, INPUT_LABELS, OPTIONAL, PER_TICK, RECORDED, RECORDER,
                            TOPIC_TYPES, TRIAL_EVENT)
 from ..graph.fields import tick_nanoseconds
+from ..graph.ticks import TICKS_RECORD, TickRanges
 from ..rclpy_session import WithMessageInfo, qos_profile, ros_session, spin_until_finished
 from .glue import LABELS_QOS, PROGRESS_QOS, Readiness, declare_run_parameters, given_parameters, steady_clock
 
@@ -76,8 +77,8 @@ class RecorderNode(Node):
             "bag_format": "clnn_ros.bag"})
         self.channels = {}     # topic -> channel id
         self.counts = {topic: 0 for topic in TOPIC_TYPES}
-        self.last_tick = {}    # per-tick topic -> sim time of its last message
-        self.missing = 0       # messages of per-tick topics that never arrived (gaps)
+        self.ticks = {topic: TickRanges() for topic in PER_TICK}  # the ticks each one holds
+        self.latest = {}  # per-tick topic: its last tick
         self.subscriptions_by_topic = {}
         self.tau_ns = tick_nanoseconds(params.tau)
         for topic, type_name in TOPIC_TYPES.items():
@@ -88,7 +89,7 @@ class RecorderNode(Node):
         self.episode_end_at = None
         self.last_message_at = time.monotonic()
         # the graph runs once a clock was recorded: no more announcements
-        self._ready = Readiness(self, self._ready_to_record, lambda: CLOCK in self.last_tick)
+        self._ready = Readiness(self, self._ready_to_record, lambda: self.ticks[CLOCK].ranges)
         self._progress_publisher = self.create_publisher(UInt64, RECORDED, PROGRESS_QOS)
         self._progress = UInt64()
         self._timer = self.create_timer(0.02, self._poll, clock=steady_clock())
@@ -142,10 +143,9 @@ class RecorderNode(Node):
                 self._write_failed(error)
                 return
             if topic in PER_TICK:
-                previous = self.last_tick.get(topic)
-                if previous is not None and stamp > previous and self.tau_ns:
-                    self.missing += max(0, round((stamp - previous) / self.tau_ns) - 1)
-                self.last_tick[topic] = stamp
+                tick = stamp // self.tau_ns
+                self.ticks[topic].add(tick)
+                self.latest[topic] = max(self.latest.get(topic, -1), tick)
             self.counts[topic] += 1
             if topic == TRIAL_EVENT and self.episode_end_at is None and self.ends_episode(data):
                 self.episode_end_at = time.monotonic()
@@ -155,8 +155,24 @@ class RecorderNode(Node):
         """An EPISODE_END of this graph's clock: its tick is the last clock's or the next (a
         stale one, or another graph's, records like any message but ends nothing)."""
         event = deserialize_message(data, TrialEvent)
-        clock = self.last_tick.get(CLOCK, 0) // self.tau_ns if self.tau_ns else 0
+        clock = self.held(CLOCK)
         return event.event == TrialEvent.EPISODE_END and clock <= event.tick <= clock + 1
+
+    def held(self, topic: str) -> int:
+        """The last tick of a per-tick topic (-1: none)."""
+        return self.latest.get(topic, -1)
+
+    def progress(self) -> int:
+        """The last tick every per-tick topic reached: a forged one far ahead on some topics
+        moves it not."""
+        return min(self.held(topic) for topic in PER_TICK)
+
+    def missing(self) -> int:
+        """Messages of per-tick topics that never arrived: the ticks up to the progress that a
+        topic lacks."""
+        progress = self.progress()
+        return sum(b - a + 1 for ticks in self.ticks.values()
+                   for a, b in ticks.missing(0, progress))
 
     def _poll(self) -> None:
         """Announce readiness once every subscription sees its publisher; report progress; write
@@ -168,8 +184,8 @@ class RecorderNode(Node):
             except OSError as error:
                 self._write_failed(error)
                 return
-        if len(self.last_tick) == len(PER_TICK):  # sent each time: a lost one is replaced
-            self._progress.data = min(self.last_tick.values()) // self.tau_ns
+        if (progress := self.progress()) >= 0:  # sent each time: a lost one is replaced
+            self._progress.data = progress
             self._progress_publisher.publish(self._progress)
         if self.episode_end_at is not None:
             now = time.monotonic()
@@ -191,6 +207,9 @@ class RecorderNode(Node):
         try:
             if not self.failure:
                 self._open_channels()
+                # what run_all compares with the run's ticks (graph.ticks)
+                self.bag.add_metadata(TICKS_RECORD, {topic: json.dumps(ticks.ranges)
+                                                     for topic, ticks in self.ticks.items()})
             self.bag.close(finalize=not self.failure)
         except OSError as error:
             self.failure = self.failure or describe_write_error(error, self.path)
@@ -218,14 +237,14 @@ def main(argv: list[str] | None = None) -> int:
         status = 1
         try:
             spin_until_finished([node], node.finished, signals)
-            status = 128 + signals[0] if signals else node.finished.result()
+            status = 0 if signals else node.finished.result()  # a requested stop: 0
         finally:
             print(f"recorder: {node.close()}", flush=True)
             if node.failure:
                 print(f"recorder: error: {node.failure}", file=sys.stderr, flush=True)
                 status = 1
-            if node.missing:
-                print(f"recorder: warning: {node.missing} messages of per-tick topics never "
+            if missing := node.missing():
+                print(f"recorder: warning: {missing} messages of per-tick topics never "
                       f"arrived (gaps in the ticks)", file=sys.stderr, flush=True)
             node.destroy_node()
         return status

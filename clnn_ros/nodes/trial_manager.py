@@ -11,12 +11,15 @@ What ends an episode early, with exit status 1 and the node to blame:
 * a stall: no tick completes for `stall_timeout_s` of the trial manager's own running time (a
   trial manager that was itself paused or starved does not count the pause); the node named is
   the first of the tick's chain whose message for the tick is missing;
-* a node of the graph that leaves the ROS graph (its process exited);
+* a node of `external_nodes` that leaves the ROS graph (the nodes run_all or launch started
+  are theirs to watch: they see the process exit; a paused one that drops out is alive);
 * another graph of the same node names in the same namespace and domain, seen before the first
   tick or within DISCOVERY_S of the trial manager's start (exit status NOT_STARTED: the run is
-  abandoned); a node of `external_nodes` that does not appear within `stall_timeout_s` once
-  the rest of the graph is up. Nodes that run_all started are waited for as long as they take: run_all
-  sees a process that dies.
+  abandoned), or a second node of a graph name later; a node of `external_nodes` that does not
+  appear within `stall_timeout_s` once the rest of the graph is up (the others are waited for
+  as long as they take);
+* a foreign publisher on a graph topic (graph.watch), unless allow_foreign_publishers: then
+  the run goes on and ends "tainted", exit status 1, never "completed".
 With a recorder it keeps the clock at most RECORDER_WINDOW ticks ahead of the recorder's
 progress, so that no message is lost to a slow recorder. Results go to out_dir as each trial
 ends (trials.csv; written to a temporary file, then renamed: a full disk keeps the last whole
@@ -40,7 +43,6 @@ from std_msgs.msg import String, UInt64
 
 from ..core.episode import seed_setup
 from ..files import describe_write_error, write_atomically, write_text_atomically
-from ..graph.content import network_action_problem
 from ..graph.fields import REACHED_MAX_STEPS, tick_nanoseconds, tick_stamp, trials_csv
 from ..graph.lockstep import Refusals, TickJoin
 from ..graph.names import (ACTION, CLOCK, GRAPH_NODES, NOT_STARTED, PUBLISHED_BY, READY,
@@ -48,8 +50,9 @@ from ..graph.names import (ACTION, CLOCK, GRAPH_NODES, NOT_STARTED, PUBLISHED_BY
                            WEIGHTS)
 from ..graph.qos import RECORDER_WINDOW
 from ..graph.run import NODE_PARAMETERS, names_list
+from ..graph.watch import describe_foreign, foreign_publishers, gone, named_twice
 from ..init_weights import episode_start
-from .glue import (LOCKSTEP_QOS, PROGRESS_QOS, READY_QOS, checked, declare_run_parameters,
+from .glue import (LOCKSTEP_QOS, PROGRESS_QOS, READY_QOS, Readiness, checked, declare_run_parameters,
                    endpoints_matched, run_node, stamp, steady_clock)
 
 WATCHDOG_S = 0.1
@@ -91,14 +94,14 @@ class TrialManagerNode(Node):
         self.last_note = self.last_graph_check = self.last_check = time.monotonic()
         self.stalled_s = 0.0  # running time of this node without progress
         self.not_started = False  # another graph of the same names runs
+        self.tainted = None  # a foreign publisher seen on a graph topic
         self.exit_reason = ""
         self.join = TickJoin((STATE, ACTION), self.on_tick, self.refusals)
         self.current = {topic: -1 for topic in CHAIN}  # the last tick each topic gave
         self.clock_pub = self.create_publisher(Clock, CLOCK, LOCKSTEP_QOS)
         self.event_pub = self.create_publisher(TrialEvent, TRIAL_EVENT, LOCKSTEP_QOS)
         inputs = [self.create_subscription(
-            msg_type, topic, checked(topic, self.params, self.refusals, self.seen(topic),
-                                     network_action_problem if topic == ACTION else None),
+            msg_type, topic, checked(topic, self.params, self.refusals, self.seen(topic)),
             LOCKSTEP_QOS)
             for msg_type, topic in ((CartPoleState, STATE), (SpikeVector, SPIKES),
                                     (Reward, REWARD), (Action, ACTION))]
@@ -109,9 +112,12 @@ class TrialManagerNode(Node):
         self.matched = endpoints_matched(self.settings["extra_nodes"],
                                          [(self.clock_pub, 1), (self.event_pub, 4)], inputs)
         self.create_subscription(String, READY, self.on_ready, READY_QOS)
+        # announced like every node's (a tool watching the graph start sees who is up)
+        self.readiness = Readiness(self, self.matched, is_running=lambda: self.join.tick > 0)
         self.recorded_tick = -1
         self.held = None  # (tick, starts a trial): the next tick, waiting for the recorder
         self.follows_recorder = RECORDER in self.extra_nodes
+        self.recorder_out = False  # the recorder dropped out of the ROS graph (watch_recorder)
         if self.follows_recorder:
             self.create_subscription(UInt64, RECORDED, self.on_recorded, PROGRESS_QOS)
         self.watchdog = self.create_timer(WATCHDOG_S, self.check, clock=steady_clock())
@@ -137,7 +143,10 @@ class TrialManagerNode(Node):
     def on_recorded(self, msg: UInt64) -> None:
         if msg.data > self.recorded_tick and self.held is not None:
             self.stalled_s = 0.0  # a slow recorder is not a stalled one
-        self.recorded_tick = max(self.recorded_tick, msg.data)
+        self.release_held(msg.data)
+
+    def release_held(self, recorded_tick: int) -> None:
+        self.recorded_tick = max(self.recorded_tick, recorded_tick)
         if self.held is not None and self.held[0] <= self.recorded_tick + RECORDER_WINDOW:
             tick, starts_trial = self.held
             self.held = None
@@ -159,7 +168,10 @@ class TrialManagerNode(Node):
         """The episode is complete once the agent's weights after the last trial are in (they
         travel on their own topic, so they may arrive after the last action)."""
         if self.last_trial_tick is not None and self.weights_tick == self.last_trial_tick:
-            self.stop(0, "completed", self.last_trial_tick)
+            if self.tainted:  # never reported as completed
+                self.stop(1, f"tainted: {self.tainted}", self.last_trial_tick)
+            else:
+                self.stop(0, "completed", self.last_trial_tick)
 
     # --- the watchdog -------------------------------------------------------------------------
 
@@ -183,23 +195,52 @@ class TrialManagerNode(Node):
             self.stop(1, self.stall_reason())
 
     def graph_problem(self) -> str | None:
-        """Another graph of the same names before the start; a node that left the ROS graph."""
+        """Another graph of the same names (before the start: the run is abandoned); a second
+        node of the graph's names, a node started by someone else that left, or a foreign
+        publisher on a graph topic (graph.watch)."""
         namespace = self.get_namespace()
         present = Counter(name for name, ns in self.get_node_names_and_namespaces()
                           if ns == namespace)
-        if time.monotonic() - self.created_at < DISCOVERY_S or self.started_at is None:
-            twice = sorted(n for n in self.expected | {TRIAL_MANAGER} if present[n] > 1)
-            if twice:
+        if twice := named_twice(present, self.expected | {TRIAL_MANAGER}):
+            if time.monotonic() - self.created_at < DISCOVERY_S or self.started_at is None:
                 self.not_started = True
                 return (f"another graph runs in namespace {namespace} on ROS domain "
                         f"{os.environ.get('ROS_DOMAIN_ID', '0') or '0'}: two nodes named "
                         f"{', '.join(twice)} (give each graph its own --namespace or "
                         f"ROS_DOMAIN_ID)")
+            return f"a second node named '{twice[0]}' joined namespace {namespace} at tick " \
+                   f"{self.join.tick}"
+        if self.follows_recorder and RECORDER in self.in_graph:
+            self.watch_recorder(bool(present[RECORDER]))
         self.in_graph |= {n for n in self.expected if present[n]}
-        left = sorted(n for n in self.in_graph if not present[n])
-        if left:
+        if left := gone(self.in_graph, present, self.external_nodes):
             return f"node '{left[0]}' left the ROS graph at tick {self.join.tick}"
+        foreign = foreign_publishers({topic: [
+            (info.node_name, info.node_namespace)
+            for info in self.get_publishers_info_by_topic(self.resolve_topic_name(topic))]
+            for topic in PUBLISHED_BY}, namespace)
+        if foreign and not self.tainted:
+            self.tainted = describe_foreign(foreign[0])
+            if not self.settings["allow_foreign_publishers"]:
+                return f"{self.tainted} at tick {self.join.tick} (its messages may have been " \
+                       f"taken for the graph's; allow_foreign_publishers: go on, tainted)"
+            self.get_logger().warning(f"{self.tainted}: the run goes on, its results tainted")
         return None
+
+    def watch_recorder(self, present: bool) -> None:
+        """Paused beyond its DDS lease, the recorder drops out of the ROS graph: what the graph
+        sends it meanwhile is lost, and the progress that would release a held tick never
+        comes. The graph goes on without it until it is back (the bag lacks those ticks, and
+        run_all says which)."""
+        if not present and not self.recorder_out:
+            self.recorder_out = True
+            self.get_logger().warning(f"the recorder dropped out of the ROS graph at tick "
+                                      f"{self.join.tick}: the graph goes on without its record")
+            if self.held is not None:
+                self.release_held(self.held[0] - RECORDER_WINDOW)
+        elif present and self.recorder_out:
+            self.recorder_out = False
+            self.recorded_tick = max(self.recorded_tick, self.join.tick)  # its progress comes
 
     def check_start(self, now: float, running: float) -> None:
         missing = self.expected - self.ready
@@ -239,7 +280,8 @@ class TrialManagerNode(Node):
     def advance(self, tick: int, starts_trial: bool) -> None:
         """Publish tick `tick` (START first if it starts a trial), unless the recorder is more
         than RECORDER_WINDOW ticks behind: then hold it until the recorder's progress comes."""
-        if self.follows_recorder and tick > self.recorded_tick + RECORDER_WINDOW:
+        if self.follows_recorder and not self.recorder_out and \
+                tick > self.recorded_tick + RECORDER_WINDOW:
             self.held = (tick, starts_trial)
             return
         if starts_trial:

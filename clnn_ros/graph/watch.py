@@ -1,0 +1,43 @@
+"""What the trial manager reads in the ROS graph, judged without ROS: the names present in its
+namespace and the publishers of the graph's topics. Who owns a process decides its death: run_all
+and launch see the exit of the nodes they start, at once; the ROS graph is consulted only for
+nodes someone else started (external_nodes). A participant that stops answering (a process
+paused longer than the DDS lease) drops out of the ROS graph while alive, so its absence is no
+death."""
+
+from __future__ import annotations
+
+from collections import Counter
+
+from .names import PUBLISHED_BY
+
+# What rmw names a publisher whose participant's node list has not arrived yet (it comes apart
+# from the endpoints, e.g. after a paused participant is rediscovered): asked again next time.
+UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"
+
+
+def named_twice(present: Counter, names: set[str]) -> list[str]:
+    """The graph's node names that two nodes of the namespace carry."""
+    return sorted(name for name in names if present[name] > 1)
+
+
+def gone(seen: set[str], present: Counter, external: set[str]) -> list[str]:
+    """The nodes started by someone else that were in the ROS graph and are not any more."""
+    return sorted(name for name in seen & external if not present[name])
+
+
+def foreign_publishers(publishers: dict[str, list[tuple[str, str]]],
+                       namespace: str) -> list[tuple[str, str, str]]:
+    """(topic, node, namespace) of each publisher on a graph topic that is not the node the
+    graph has publish it (graph.names.PUBLISHED_BY) in this namespace: forged messages, or a
+    second graph remapped onto this one's topics."""
+    return [(topic, node, node_namespace)
+            for topic, endpoints in sorted(publishers.items())
+            for node, node_namespace in endpoints
+            if (node, node_namespace) != (PUBLISHED_BY[topic], namespace) and
+            node != UNKNOWN_NODE]
+
+
+def describe_foreign(found: tuple[str, str, str]) -> str:
+    topic, node, namespace = found
+    return f"a foreign publisher on {topic}: node '{node}' in namespace {namespace}"

@@ -1,0 +1,184 @@
+"""What an attacker and a loaded machine broke before (issue 23), each as a test: a process
+paused longer than its DDS lease (shortened here to 2 s: the project's is 180 s) is no death and
+the run equals the core; a foreign publisher on a graph topic is named and ends the run, or with
+--allow-foreign-publishers the run goes on and ends "tainted", never "completed", and analyze
+reads its bag; the bag holds what trials.csv holds, or the last line says which ticks it lacks;
+a second node of a graph name mid-run is named; SIGHUP stops a run as Ctrl-C does."""
+
+from __future__ import annotations
+
+import csv
+import json
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from clnn_ros import bag, rosenv
+from clnn_ros.core.episode import run_episode
+from clnn_ros.core.params import Params
+from clnn_ros.graph.names import PER_TICK, STATE
+from clnn_ros.graph.ticks import TICKS_RECORD, TickRanges
+
+from test_graph import processes_with, wait_for_line
+from test_recording import child
+
+from conftest import HANG_S, free_domain_id, problem_lines, ros_environment
+
+pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
+DOMAIN_ID = free_domain_id()
+SEED, TRIALS, MAX_STEPS = 1, 12, 600
+LEASE_S = 2  # the participants' DDS lease in the paused runs
+
+
+@pytest.fixture(scope="module")
+def ros_env(tmp_path_factory):
+    return ros_environment(DOMAIN_ID, tmp_path_factory)
+
+
+@pytest.fixture(scope="module")
+def short_lease(ros_env, tmp_path_factory) -> dict:
+    """The project's Fast DDS profile with a LEASE_S participant lease."""
+    profile = Path(rosenv.__file__).with_name("fastdds_profile.xml").read_text()
+    profile, replaced = re.subn(r"<leaseDuration><sec>\d+</sec></leaseDuration>",
+                                f"<leaseDuration><sec>{LEASE_S}</sec></leaseDuration>"
+                                "<leaseAnnouncement><sec>0</sec><nanosec>500000000</nanosec>"
+                                "</leaseAnnouncement>", profile)
+    assert replaced == 1
+    path = tmp_path_factory.mktemp("lease") / "short_lease.xml"
+    path.write_text(profile)
+    return {**ros_env, "FASTRTPS_DEFAULT_PROFILES_FILE": str(path)}
+
+
+def start(env, out: Path, *options) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-m", "clnn_ros.run_all", "--seed", str(SEED), "--trials", str(TRIALS),
+         "--max-steps", str(MAX_STEPS), "--out", str(out), *options],
+        env={**env, "CLNN_TEST_RUN": str(out)}, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True, start_new_session=True)
+
+
+def steps_of(out: Path) -> list[int]:
+    with open(out / "trials.csv") as f:
+        return [int(row["steps"]) for row in csv.DictReader(f)]
+
+
+def core_steps(trials: int) -> list[int]:
+    return run_episode(SEED, Params(trials=trials, max_steps=MAX_STEPS)).steps.tolist()
+
+
+@pytest.mark.parametrize("node", ["environment", "trial_manager", "agent"])
+def test_a_pause_longer_than_the_lease_is_no_death(short_lease, tmp_path, node):
+    """SIGSTOP for three leases: the others drop the paused participant while it is alive; the
+    run waits for it (stall timeout 60 s), blames nobody, and equals the core."""
+    process = start(short_lease, tmp_path, "--stall-timeout", "60", "--no-record")
+    wait_for_line(process.stdout, "trial    2/")
+    pid = child(process, f"clnn_ros.nodes.{node}")
+    process_pause(pid, 3 * LEASE_S)
+    _, stderr = process.communicate(timeout=HANG_S)
+    assert process.returncode == 0, stderr[-3000:]
+    assert not problem_lines(stderr), stderr[-3000:]
+    assert steps_of(tmp_path) == core_steps(TRIALS)
+    assert not processes_with(str(tmp_path))
+
+
+def process_pause(pid: int, seconds: float) -> None:
+    import os
+    os.kill(pid, signal.SIGSTOP)
+    time.sleep(seconds)
+    os.kill(pid, signal.SIGCONT)
+
+
+def test_the_bag_holds_what_trials_csv_holds_or_says_what_it_lacks(short_lease, tmp_path):
+    """The recorder paused past its lease: the others' writers drop it, and what they sent
+    meanwhile never reaches it. The run completes; the bag holds every tick of trials.csv, or
+    the last line names exactly the ticks it lacks (as the bag's own record shows them)."""
+    process = start(short_lease, tmp_path, "--stall-timeout", "60")
+    wait_for_line(process.stdout, "trial    2/")
+    process_pause(child(process, "clnn_ros.nodes.recorder"), 3 * LEASE_S)
+    stdout, stderr = process.communicate(timeout=HANG_S)
+    assert process.returncode == 0, stderr[-3000:]
+    ticks = json.loads((tmp_path / "summary.json").read_text())["ticks"]
+    record = bag.metadata(tmp_path / "bag", TICKS_RECORD)
+    lacking = {topic: TickRanges(json.loads(record[topic])).missing(0, ticks - 1)
+               for topic in PER_TICK}
+    last = stderr.strip().splitlines()[-1]
+    if any(lacking.values()):
+        assert last.startswith("run_all: warning: the bag lacks ticks "), stderr[-3000:]
+        first, end = lacking[STATE][0] if lacking[STATE] else next(
+            gaps[0] for gaps in lacking.values() if gaps)
+        assert f"{first}-{end}" in last or f"{first}" in last
+    else:
+        assert "lacks" not in stderr
+    assert steps_of(tmp_path) == core_steps(TRIALS)
+
+
+FORGER = """
+import sys, time, rclpy
+from clnn_ros_msgs.msg import SpikeVector
+rclpy.init()
+node = rclpy.create_node("forger")
+publisher = node.create_publisher(SpikeVector, "rln/spikes", 10)
+end = time.monotonic() + float(sys.argv[1])
+tick = 0
+while time.monotonic() < end:
+    publisher.publish(SpikeVector(tick=tick, spikes=[0, 0, 1, 0, 0, 0]))
+    tick += 1
+    time.sleep(0.01)
+"""
+
+
+@pytest.mark.parametrize("allowed", [False, True], ids=["refused", "allowed"])
+def test_a_foreign_publisher_is_named_and_the_run_never_reported_completed(
+        ros_env, tmp_path, allowed):
+    process = start(ros_env, tmp_path, "--stall-timeout", "30",
+                    *(["--allow-foreign-publishers"] if allowed else []))
+    wait_for_line(process.stdout, "trial    2/")
+    forger = subprocess.Popen([sys.executable, "-c", FORGER, "4"], env=ros_env,
+                              stderr=subprocess.PIPE, text=True)
+    stdout, stderr = process.communicate(timeout=HANG_S)
+    forger.communicate(timeout=60)
+    assert process.returncode == 1, stderr[-3000:]
+    named = "a foreign publisher on rln/spikes: node 'forger' in namespace /"
+    assert problem_lines(stderr)[-1].startswith(f"run_all: error: {'tainted: ' if allowed else ''}"
+                                                f"{named}"), stderr[-3000:]
+    assert "completed" not in stdout
+    if allowed:  # it went on to the end: every trial, equal to the core (the fuzz was refused)
+        assert len(steps_of(tmp_path)) == TRIALS
+    analysis = subprocess.run([sys.executable, "-m", "clnn_ros.analyze", str(tmp_path / "bag"),
+                               "--out", str(tmp_path / "analysis")], env=ros_env,
+                              capture_output=True, text=True, timeout=300)
+    assert analysis.returncode == 0, analysis.stderr
+    assert "never arrived" not in stderr
+
+
+def test_a_second_node_of_a_graph_name_mid_run_is_named(ros_env, tmp_path):
+    process = start(ros_env, tmp_path, "--stall-timeout", "30", "--no-record")
+    wait_for_line(process.stdout, "trial    2/")
+    intruder = subprocess.Popen([sys.executable, "-m", "clnn_ros.nodes.agent", "--ros-args",
+                                 "-p", f"seed:={SEED}"], env=ros_env, stderr=subprocess.PIPE,
+                                text=True)
+    try:
+        _, stderr = process.communicate(timeout=HANG_S)
+    finally:
+        intruder.send_signal(signal.SIGINT)
+        intruder.communicate(timeout=60)
+    assert process.returncode == 1, stderr[-3000:]
+    assert re.match(r"run_all: error: a second node named 'agent' joined namespace / at tick "
+                    r"\d+$", problem_lines(stderr)[-1]), stderr[-3000:]
+
+
+def test_sighup_stops_a_run_with_its_summary(ros_env, tmp_path):
+    """A closed terminal (SIGHUP) ends a run as Ctrl-C does: results kept, a summary, 129."""
+    process = start(ros_env, tmp_path)
+    wait_for_line(process.stdout, "trial    2/")
+    process.send_signal(signal.SIGHUP)
+    stdout, stderr = process.communicate(timeout=HANG_S)
+    assert process.returncode == 128 + signal.SIGHUP, stderr[-3000:]
+    assert "run_all: interrupted" in stderr and "Traceback" not in stderr
+    assert "run_all: interrupted: " in stdout and steps_of(tmp_path)
+    assert not processes_with(str(tmp_path))
