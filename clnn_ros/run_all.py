@@ -262,12 +262,12 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
                                           interrupted, supervisor.note_files)
         else:
             status, failed = run_separate(supervisor, values, Path(tmp), env_command,
-                                          namespace, interrupted, began)
+                                          namespace, interrupted, began, bag_path)
             reason = supervisor.children[TRIAL_MANAGER].own_error()
         if bag_path is not None:
             recorder = supervisor.children[RECORDER]
             if not failed and not interrupted and recorder.returncode not in (None, 0):
-                report_failure(recorder)  # it failed first: the graph then stopped
+                report_failure(recorder, bag_path)  # it failed first: the graph then stopped
                 failed = True
             episode_ended = status in (0, 1) and not failed
             recorder_forced = stop_recorder(supervisor, episode_ended)
@@ -277,7 +277,7 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
                 (() if episode_ended else (-signal.SIGINT,))
             if not failed and not interrupted and not recorder_forced and \
                     recorder.returncode not in stopped_as_told:
-                report_failure(recorder)
+                report_failure(recorder, bag_path)
                 failed = True
         summary = fresh_summary(out, began)
     if summary and not failed:
@@ -289,15 +289,15 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
     if bag_path is not None:
         with contextlib.suppress(OSError):
             bag_path.rmdir()  # empty: created here to check it could be; nothing was recorded
-        print(f"run_all: bag {bag_path}" if bag_path.exists() else
-              "run_all: nothing recorded, no bag", flush=True)
-        if summary.get("exit_reason") == "completed" and \
-                (bag_path / bag.METADATA_FILE).is_file() and \
+        finished = (bag_path / bag.METADATA_FILE).is_file()
+        if finished or not bag_path.exists():  # an unfinished one: the error line says so
+            print(f"run_all: bag {bag_path}" if finished else
+                  "run_all: nothing recorded, no bag", flush=True)
+        if summary.get("exit_reason") == "completed" and finished and \
                 (lacking := bag_lacks(bag_path, summary["ticks"])):
             say(f"run_all: warning: the bag lacks {lacking} (the run's ticks: 0-"
                 f"{summary['ticks'] - 1}, as in trials.csv)")
-        if recorder_forced and bag_path.exists() and \
-                not (bag_path / bag.METADATA_FILE).is_file():  # else its own lines said so
+        if recorder_forced and bag_path.exists() and not finished:  # else its own lines said so
             say(f"run_all: warning: the recorder had to be stopped before it finished the bag: "
                 f"python -m clnn_ros.bag repair {bag_path}")
     if failed:

@@ -227,7 +227,8 @@ def child_environment() -> dict:
 
 def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
                  env_command: list[str] | None, namespace: str,
-                 interrupted: list[int], began: float) -> tuple[int, bool]:
+                 interrupted: list[int], began: float,
+                 bag_path: Path | None) -> tuple[int, bool]:
     """Start the nodes (env_command None: no environment) and watch them until the trial
     manager ends. Returns (its exit status, or 128 + signal; whether run_all saw a process fail
     itself, and said so: one that exited with an error or a signal, or that someone else
@@ -268,7 +269,7 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
     # Ctrl-C reaches every process of the terminal's group: run_all's own handler has run long
     # before a child handled it and exited.
     if failure is not None and not interrupted:
-        report_failure(failure)
+        report_failure(failure, bag_path)
     nodes = [n for n in NODES if n in supervisor.children]
     # After a normal end every node has its EPISODE_END; after a failure a node that was still
     # starting may have missed it: they are told with SIGINT. One still importing on a loaded
@@ -284,9 +285,13 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
     return status, failure is not None
 
 
-def report_failure(child) -> None:
-    """The one error line, at once, then the last lines of the child's stderr."""
-    say(f"run_all: error: {child.describe_exit()}")
+def report_failure(child, bag_path: Path | None = None) -> None:
+    """The one error line, at once, then the last lines of the child's stderr. A recorder that
+    failed left its bag unfinished: the line says how to save its complete chunks."""
+    repair = f"; the bag {bag_path} is not finished, its complete chunks: python -m " \
+             f"clnn_ros.bag repair {bag_path} [--out DIR]" \
+        if child.name == RECORDER and bag_path is not None else ""
+    say(f"run_all: error: {child.describe_exit()}{repair}")
     for line in child.last_lines():
         say(f"  {child.name}| {line}")
 

@@ -488,6 +488,26 @@ def test_repair_refuses_bad_input_with_one_line(tmp_path):
     assert len(result.stderr.strip().splitlines()) == 1
 
 
+def test_repair_on_a_full_disk_says_where_it_could_not_write(tmp_path):
+    """--out on a 32 KB tmpfs (a mount namespace of its own), the sample bag bigger: one line
+    naming the place and what to do, and no half-written copy left there."""
+    full = tmp_path / "full"
+    full.mkdir()
+    out = full / "copy"
+    script = 'mount -t tmpfs -o size=32k tmpfs "$FULL" || exit 99; "$@"; code=$?; ls -A "$FULL"; ' \
+             'exit $code'
+    result = subprocess.run(
+        ["unshare", "--mount", "sh", "-c", script, "_", sys.executable, "-m", "clnn_ros.bag",
+         "repair", str(REPO / "bags" / SAMPLE), "--out", str(out)],
+        env={**os.environ, "FULL": str(full)}, capture_output=True, text=True, timeout=60)
+    if result.returncode == 99:
+        pytest.skip("no mount namespace here")
+    assert result.returncode == 1 and "Traceback" not in result.stderr, result.stderr
+    assert result.stderr.strip() == f"bag: error: disk full writing {out}: nothing kept there; " \
+                                    f"give --out DIR on a disk with room"
+    assert result.stdout.strip() == ""  # the tmpfs holds nothing: no half-written copy
+
+
 # --- analyze: bad input ------------------------------------------------------------------------
 
 def analyze(*args):

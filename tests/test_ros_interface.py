@@ -81,6 +81,11 @@ def test_a_read_only_parameter_is_refused_with_a_reason(agent_by_hand):
     assert [values[0].integer_value, values[1].bool_value, values[2].integer_value] == \
         [128, True, 3]  # unchanged; the node follows the graph's clock
     assert values[3].integer_value == 3  # not given: the paper's count for 1 SV, shown as such
+    sim_time = SetParameters.Request(parameters=[ParameterMsg(
+        name="use_sim_time", value=ParameterValue(type=ParameterType.PARAMETER_BOOL,
+                                                  bool_value=False))])
+    result = call(agent_by_hand, SetParameters, "/agent/set_parameters", sim_time).results[0]
+    assert not result.successful and "use_sim_time is read-only" in result.reason
 
 
 def test_parameters_describe_their_meaning_and_constraints(agent_by_hand):

@@ -34,5 +34,5 @@ from .schemas import message_class, schema_text, type_hash
 from .writer import CHUNK_SECONDS, BagWriter, qos_dicts
 
 __all__ = ["METADATA_FILE", "foreign_files", "remove_bag", "BagError", "Decoder", "iter_raw",
-           "mcap_file", "open_bag", "stamp_ns", "message_class", "schema_text", "type_hash",
+           "mcap_file", "metadata", "open_bag", "stamp_ns", "message_class", "schema_text", "type_hash",
            "CHUNK_SECONDS", "BagWriter", "qos_dicts"]

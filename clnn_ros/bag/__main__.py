@@ -8,7 +8,7 @@ from pathlib import Path
 from ..cli import OneLineArgumentParser
 from ..files import describe_write_error
 from .reader import BagError
-from .repair import repair
+from .repair import repair, repaired_path
 
 
 def main(argv=None) -> int:
@@ -23,11 +23,15 @@ def main(argv=None) -> int:
     repair_command.add_argument("--out", type=Path,
                                 help="the new bag directory (default: <bag>_repaired)")
     args = parser.parse_args(argv)
+    out = args.out or repaired_path(args.bag)
     try:
-        out, messages, complete = repair(args.bag, args.out)
-    except (BagError, OSError) as error:
-        reason = describe_write_error(error) if isinstance(error, OSError) else error
-        print(f"bag: error: {reason}", file=sys.stderr)
+        out, messages, complete = repair(args.bag, out)
+    except BagError as error:
+        print(f"bag: error: {error}", file=sys.stderr)
+        return 1
+    except OSError as error:
+        print(f"bag: error: {describe_write_error(error, out)}: nothing kept there; give --out "
+              f"DIR on a disk with room", file=sys.stderr)
         return 1
     print(f"bag: {messages} messages" + (f" ({args.bag} was complete)" if complete else
                                          " (every complete chunk)") + f" in {out}")

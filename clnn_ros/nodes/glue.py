@@ -9,7 +9,8 @@ import sys
 import time
 from typing import Callable
 
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                SetParametersResult)
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.node import Node
@@ -210,6 +211,16 @@ def close_node(node: Node) -> None:
     node.destroy_node()
 
 
-def use_sim_time(node: Node) -> None:
-    """The node's time is the graph's sim time (/clock, from the trial manager)."""
-    node.set_parameters([Parameter("use_sim_time", Parameter.Type.BOOL, True)])
+def use_sim_time(node: Node, sim_time: bool = True) -> None:
+    """The node's time is the graph's sim time (/clock, from the trial manager), or its own
+    (the trial manager's, the recorder's), for the whole run: a later change of use_sim_time
+    is refused, as every other parameter is (read-only)."""
+    if sim_time:
+        node.set_parameters([Parameter("use_sim_time", Parameter.Type.BOOL, True)])
+
+    def refuse_use_sim_time(parameters) -> SetParametersResult:
+        changed = any(parameter.name == "use_sim_time" for parameter in parameters)
+        return SetParametersResult(successful=not changed, reason=(
+            f"use_sim_time is read-only: the node runs on the graph's "
+            f"{'sim' if sim_time else 'own'} time") if changed else "")
+    node.add_on_set_parameters_callback(refuse_use_sim_time)

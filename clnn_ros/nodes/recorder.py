@@ -46,7 +46,8 @@ from ..graph.names import (CLOCK, INPUT_LABELS, OPTIONAL, PER_TICK, RECORDED, RE
 from ..graph.fields import tick_nanoseconds
 from ..graph.ticks import TICKS_RECORD, TickRanges
 from ..rclpy_session import WithMessageInfo, qos_profile, ros_session, spin_until_finished
-from .glue import LABELS_QOS, PROGRESS_QOS, Readiness, declare_run_parameters, given_parameters, steady_clock
+from .glue import (LABELS_QOS, PROGRESS_QOS, Readiness, declare_run_parameters,
+                   given_parameters, steady_clock, use_sim_time)
 
 RECORD_QOS = qos_profile(qos.RECORD)
 LINGER_S = 0.3      # after EPISODE_END: wait for messages still in flight on other topics
@@ -61,6 +62,7 @@ class RecorderNode(Node):
                        "environment": ("", "what ran as the environment node, kept in the bag "
                                        "(run_all sets it): cartpole, gymnasium, mujoco, external "
                                        "or the --env-node command")})
+        use_sim_time(self, False)  # log and receive times are wall-clock, as rosbag2's
         bag_path = settings.pop("bag_path")
         environment = settings.pop("environment")
         if not bag_path:

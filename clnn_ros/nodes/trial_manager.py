@@ -52,8 +52,9 @@ from ..graph.qos import RECORDER_WINDOW
 from ..graph.run import NODE_PARAMETERS, names_list
 from ..graph.watch import describe_foreign, foreign_publishers, gone, named_twice
 from ..init_weights import episode_start
-from .glue import (LOCKSTEP_QOS, PROGRESS_QOS, READY_QOS, Readiness, checked, declare_run_parameters,
-                   endpoints_matched, run_node, stamp, steady_clock)
+from .glue import (LOCKSTEP_QOS, PROGRESS_QOS, READY_QOS, Readiness, checked,
+                   declare_run_parameters, endpoints_matched, run_node, stamp, steady_clock,
+                   use_sim_time)
 
 WATCHDOG_S = 0.1
 GRAPH_CHECK_S = 0.5  # how often the ROS graph is looked at for nodes that left it
@@ -70,6 +71,7 @@ class TrialManagerNode(Node):
     def __init__(self, run: dict, **node_options):
         super().__init__(TRIAL_MANAGER, **node_options)  # its time is its own: it has the clock
         self.params, self.settings = declare_run_parameters(self, run)
+        use_sim_time(self, False)
         self.tau_ns = tick_nanoseconds(self.params.tau)
         self.extra_nodes = names_list(self.settings["extra_nodes"])
         self.finished, self.failure = Future(), None
