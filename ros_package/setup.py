@@ -3,6 +3,7 @@
 commands, the launch file and the package manifest. pip installs the same code from
 ../pyproject.toml (its version is package.xml's: tests/test_ros_package.py checks)."""
 
+import sys
 import xml.etree.ElementTree as ElementTree
 from pathlib import Path
 
@@ -27,6 +28,38 @@ EXECUTABLES = {
     "save_checkpoint": "clnn_ros.save_checkpoint:main",
 }
 
+# Each executable is a small script that imports its function from whichever clnn_ros is on the
+# Python path. Not a setuptools entry point: its script looks the function up in the metadata of
+# the first distribution named clnn_ros, and with pip's copy (no node entry points) found
+# before this one's, an executable died with a bare StopIteration.
+LAUNCHER = """#!{python}
+\"\"\"`ros2 run clnn_ros {name}`: {module}.{function}().\"\"\"
+import sys
+
+try:
+    from {module} import {function}
+except ImportError as error:
+    sys.exit(f"{name}: error: cannot import {module} ({{error}}): source the workspace's "
+             f"install/setup.bash, or activate the environment that has clnn_ros")
+sys.exit({function}())
+"""
+
+
+def launchers(folder: Path) -> list[str]:
+    """Write the executables' scripts into `folder` (under this package); their paths, as
+    data_files takes them."""
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for name, target in EXECUTABLES.items():
+        module, function = target.split(":")
+        path = folder / name
+        path.write_text(LAUNCHER.format(python=sys.executable, name=name, module=module,
+                                        function=function))
+        path.chmod(0o755)
+        paths.append(str(path.relative_to(HERE)))
+    return paths
+
+
 if __name__ == "__main__":
     setup(
         name=PACKAGE,
@@ -37,9 +70,8 @@ if __name__ == "__main__":
             ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
             (f"share/{PACKAGE}", ["package.xml"]),
             (f"share/{PACKAGE}/launch", ["launch/graph.launch.py"]),
+            (f"lib/{PACKAGE}", launchers(HERE / "build" / "launchers")),
         ],
         install_requires=["setuptools"],
         zip_safe=True,
-        entry_points={"console_scripts": [f"{name} = {target}"
-                                          for name, target in EXECUTABLES.items()]},
     )

@@ -11,6 +11,7 @@ from __future__ import annotations
 import ast
 import importlib
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -73,14 +74,20 @@ def test_setup_installs_the_manifest_marker_launch_file_and_an_executable_per_no
     distribution = setup_distribution()
     assert distribution.get_name() == "clnn_ros"
     assert distribution.get_version() == parse_package(PACKAGE_DIR / "package.xml").version
-    assert dict(distribution.data_files) == {
+    data_files = dict(distribution.data_files)
+    executables = data_files.pop("lib/clnn_ros")
+    assert data_files == {
         "share/ament_index/resource_index/packages": ["resource/clnn_ros"],
         "share/clnn_ros": ["package.xml"], "share/clnn_ros/launch": ["launch/graph.launch.py"]}
     for _, sources in distribution.data_files:
         assert all((PACKAGE_DIR / source).is_file() for source in sources)
     assert {"clnn_ros", "clnn_ros.nodes", "clnn_ros.core"} <= set(distribution.packages)
-    scripts = dict(line.replace(" ", "").split("=")
-                   for line in distribution.entry_points["console_scripts"])
+    scripts = {}  # executable: "module:function" it runs
+    for source in executables:
+        path = PACKAGE_DIR / source
+        assert os.access(path, os.X_OK), source
+        imported = re.search(r"^    from (\S+) import (\w+)$", path.read_text(), re.MULTILINE)
+        scripts[path.name] = f"{imported[1]}:{imported[2]}"
     for name, target in scripts.items():
         module, function = target.split(":")
         assert callable(getattr(importlib.import_module(module), function)), name
@@ -92,6 +99,27 @@ def test_setup_installs_the_manifest_marker_launch_file_and_an_executable_per_no
     assert set(commands.values()) <= set(scripts.values())
     assert scripts.keys() >= {"environment", "encoder", "agent", "reward", "trial_manager",
                               "recorder", "run_all", "echo", "topics"}
+
+
+def test_an_executable_without_clnn_ros_on_the_path_says_so_in_one_line():
+    """With pip's and colcon's copies both installed and the workspace not sourced, an
+    executable looked its function up in the first clnn_ros distribution's metadata (pip's, no
+    node entry points) and died with a bare StopIteration. Now it imports the function from
+    whichever clnn_ros Python finds, or says in one line what to do."""
+    setup_distribution()  # writes the executables
+    agent = PACKAGE_DIR / "build" / "launchers" / "agent"
+    works = subprocess.run([sys.executable, str(agent), "x"], capture_output=True, text=True,
+                           timeout=120)
+    assert works.returncode == 2 and works.stderr.startswith(
+        "agent: error: unexpected arguments ['x']"), works.stderr
+    # -S: no site-packages, so no clnn_ros (nor rclpy) to import
+    alone = subprocess.run([sys.executable, "-S", str(agent)], capture_output=True, text=True,
+                           timeout=120, cwd="/")
+    assert alone.returncode == 1 and "Traceback" not in alone.stderr, alone.stderr
+    assert alone.stderr.startswith("agent: error: cannot import clnn_ros.nodes.agent (") and \
+        alone.stderr.strip().endswith("source the workspace's install/setup.bash, or activate "
+                                      "the environment that has clnn_ros"), alone.stderr
+    assert len(alone.stderr.strip().splitlines()) == 1
 
 
 def test_the_launch_file_compiles():
