@@ -1,4 +1,4 @@
-"""Batch engine: many episodes (seeds) at once, compiled with numba, one seed per thread.
+"""Batch engine: many episodes (seeds) at once, compiled with numba.
 
 It runs the core's own code, compiled: the physics, the encoder and every part of the learning
 rule (inference, tagging, punishment, reward, counter decay, the success counter: the
@@ -6,6 +6,14 @@ rule (inference, tagging, punishment, reward, counter decay, the success counter
 and one shortcut: the network's decision for each input pattern is cached, and made again only
 when the pattern comes back after a change of the weights (a punishment or a reward), except
 with `tie_break="random"`, which draws on every tie.
+
+How it spends its time (measured, docs/benchmark_core.md): a tick waits mostly on its physics
+step, a chain of dependent operations through libm's sin and cos. So each thread runs two
+seeds whose ticks take turns part by part (two lanes: both decide, both step, both learn), the
+one lane's step running while the other's waits; the rare work (a reward or punishment, a
+trial's end) is done outside the tick loop. Seeds take very different times (a seed stuck in a
+local optimum fails in few steps), so the threads take them from a shared queue, one at a time,
+and end together.
 
 tests/test_batch.py proves it equal to the reference core (clnn_ros.core) trial by trial and in
 the final weights, bit for bit, for every option value.
@@ -25,6 +33,7 @@ from numba.core import types
 from numba.extending import intrinsic, register_jitable
 
 from .core import encoder, jitable, params, physics, random_stream, rln
+from .core import rule as rule_values
 from .core.encoder import Encoder, encode_active
 from .core.episode import angle_grid, seed_setup
 from .core.params import Params
@@ -105,12 +114,13 @@ def _step(clock, neuron, setting):
 
 @register_jitable(forceinline=True)
 def _learn(lane, clock, setting, neuron, pattern, stepped):
-    """The rest of a tick, after its physics step `stepped` (the core's RLNAgent.act's tagging,
-    the success counter and RLNAgent.learn); at the end of a trial its results are written and
-    the next trial begins. Returns (clock, whether the seed is done)."""
-    (weights, angles, steps_out, status_out, _, decisions, punish_tagged_at, reward_tagged_at,
-     eligible, active, _) = lane
-    max_steps, rule, learn = setting[6], setting[8], setting[9]
+    """The rest of a tick, after its physics step `stepped`: the core's RLNAgent.act's tagging,
+    the success counter, and RLNAgent.learn when there is no reward (the counters decay: the
+    clock advances). Returns (clock, reward kind, status); with a reward kind other than NONE,
+    or at the trial's end, the lane is to be settled (_settle) before its next tick."""
+    (weights, _, _, _, _, decisions, punish_tagged_at, reward_tagged_at, eligible, active,
+     _) = lane
+    rule, learn = setting[8], setting[9]
     t, trial, successes, now = clock[4:]
     x, x_dot, theta, theta_dot, status = stepped
     # Tagged after the step (it reads nothing the step writes): the step's long chain of
@@ -118,46 +128,62 @@ def _learn(lane, clock, setting, neuron, pattern, stepped):
     tag_action_path(punish_tagged_at, reward_tagged_at, eligible, neuron,
                     (decisions[pattern, 1], decisions[pattern, 2]), active, now, rule)
     kind, successes = outcome(successes, status != CONTINUE, rule)
-    if learn:
+    if learn and kind == NONE:
         now = update(kind, weights, punish_tagged_at, reward_tagged_at, eligible, active, now,
                      rule)
-        if kind != NONE:
-            decisions[:, 0] = STALE
-    ended = status != CONTINUE
-    if not ended:
+    if status == CONTINUE:
         t += 1
-        ended = t >= max_steps
-    done = False
-    if ended:
-        steps_out[trial] = t
-        status_out[trial] = status
-        trial += 1
-        done = trial == angles.shape[0]
-        if not done:
-            x, x_dot, theta, theta_dot, t, trial, successes, now = _start_trial(
-                lane, (x, x_dot, theta, theta_dot, t, trial, successes, now), setting)
-    return (x, x_dot, theta, theta_dot, t, trial, successes, now), done
+    return (x, x_dot, theta, theta_dot, t, trial, successes, now), kind, status
+
+
+@register_jitable
+def _settle(lane, clock, kind, status, setting):
+    """The rest of the tick that _learn left: RLNAgent.learn with a reward kind other than NONE;
+    at the end of a trial its results are written and the next trial begins. Returns (clock,
+    whether the seed is done)."""
+    (weights, angles, steps_out, status_out, _, decisions, punish_tagged_at, reward_tagged_at,
+     eligible, active, _) = lane
+    max_steps, rule, learn = setting[6], setting[8], setting[9]
+    x, x_dot, theta, theta_dot, t, trial, successes, now = clock
+    if learn and kind != NONE:
+        now = update(kind, weights, punish_tagged_at, reward_tagged_at, eligible, active, now,
+                     rule)
+        decisions[:, 0] = STALE
+    clock = (x, x_dot, theta, theta_dot, t, trial, successes, now)
+    if status == CONTINUE and t < max_steps:
+        return clock, False
+    steps_out[trial] = t
+    status_out[trial] = status
+    if trial + 1 == angles.shape[0]:
+        return clock, True
+    return _start_trial(lane, (x, x_dot, theta, theta_dot, t, trial + 1, successes, now),
+                        setting), False
 
 
 @numba.njit(cache=True, _nrt=False)
 def _tick(lane_a, clock_a, lane_b, clock_b, setting, both):
-    """Lane a ticks, and with `both` lane b too, until one of their seeds is done: returns
-    (clock_a, whether a's seed is done, clock_b, whether b's is). The two lanes' ticks take
-    turns part by part: a tick waits mostly on its physics step's chain of dependent operations,
-    and the other lane's step, next to it, runs in that wait."""
-    done_a = done_b = False
-    neuron_b, pattern_b, stepped_b = 0, 0, (0.0, 0.0, 0.0, 0.0, 0)
-    while not (done_a or done_b):
+    """Lane a ticks, and with `both` lane b too, until one of them is to be settled (a reward or
+    a punishment, or a trial's end): returns (clock, reward kind, status) of a, then of b. The
+    two lanes' ticks take turns part by part: a tick waits mostly on its physics step's chain of
+    dependent operations, and the other lane's step, next to it, runs in that wait."""
+    max_steps = setting[6]
+    neuron_b, pattern_b, stepped_b = 0, 0, (0.0, 0.0, 0.0, 0.0, CONTINUE)
+    kind_b, status_b = NONE, CONTINUE
+    while True:
         neuron_a, pattern_a = _act(lane_a, clock_a, setting)
         if both:
             neuron_b, pattern_b = _act(lane_b, clock_b, setting)
         stepped_a = _step(clock_a, neuron_a, setting)
         if both:
             stepped_b = _step(clock_b, neuron_b, setting)
-        clock_a, done_a = _learn(lane_a, clock_a, setting, neuron_a, pattern_a, stepped_a)
+        clock_a, kind_a, status_a = _learn(lane_a, clock_a, setting, neuron_a, pattern_a,
+                                           stepped_a)
         if both:
-            clock_b, done_b = _learn(lane_b, clock_b, setting, neuron_b, pattern_b, stepped_b)
-    return clock_a, done_a, clock_b, done_b
+            clock_b, kind_b, status_b = _learn(lane_b, clock_b, setting, neuron_b, pattern_b,
+                                               stepped_b)
+        if kind_a != NONE or clock_a[4] >= max_steps or (
+                both and (kind_b != NONE or clock_b[4] >= max_steps)):
+            return clock_a, kind_a, status_a, clock_b, kind_b, status_b
 
 
 @intrinsic
@@ -206,17 +232,21 @@ def _work(taken, episodes, setting, scratch_a, scratch_b):
         clock_b = _start_seed(_lane(k_b, episodes, scratch_b), setting)
     while k_a < n_seeds:
         both = k_b < n_seeds
-        clock_a, done_a, clock_b, done_b = _tick(
-            _lane(k_a, episodes, scratch_a), clock_a,
-            _lane(k_b if both else k_a, episodes, scratch_b), clock_b, setting, both)
+        lane_a = _lane(k_a, episodes, scratch_a)
+        lane_b = _lane(k_b if both else k_a, episodes, scratch_b)
+        clock_a, kind_a, status_a, clock_b, kind_b, status_b = _tick(
+            lane_a, clock_a, lane_b, clock_b, setting, both)
+        clock_a, done_a = _settle(lane_a, clock_a, kind_a, status_a, setting)
         if done_a:
             k_a = _take_next(taken)
             if k_a < n_seeds:
                 clock_a = _start_seed(_lane(k_a, episodes, scratch_a), setting)
-        if done_b:
-            k_b = _take_next(taken)
-            if k_b < n_seeds:
-                clock_b = _start_seed(_lane(k_b, episodes, scratch_b), setting)
+        if both:
+            clock_b, done_b = _settle(lane_b, clock_b, kind_b, status_b, setting)
+            if done_b:
+                k_b = _take_next(taken)
+                if k_b < n_seeds:
+                    clock_b = _start_seed(_lane(k_b, episodes, scratch_b), setting)
         if k_a >= n_seeds:  # lane a idle: b, if it still runs, goes on alone as lane a
             k_a, k_b, clock_a, clock_b = k_b, k_a, clock_b, clock_a
             scratch_a, scratch_b = scratch_b, scratch_a
@@ -255,9 +285,8 @@ def _drop_stale_cache() -> None:
     to one of those, the cached engine would run the old rule. A digest of them beside the
     cache drops it then (through the dispatchers' cache objects: numba has no public call)."""
     # params: the option indices (TIE_BREAKS) are compiled in as constants
-    core_sources = b"".join(Path(m.__file__).read_bytes() for m in (rln, physics, encoder,
-                                                                    random_stream, params,
-                                                                    jitable))
+    core = (rln, rule_values, physics, encoder, random_stream, params, jitable)
+    core_sources = b"".join(Path(m.__file__).read_bytes() for m in core)
     digest = hashlib.sha256(core_sources).hexdigest()
     stamp = Path(_run_many._cache._cache_path) / "batch.core_sources.sha256"
     try:

@@ -17,7 +17,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .jitable import jitable
+from .jitable import tick_kernel
 from .params import STATE_NAMES, Params
 
 STATE_UNITS = ("m", "m/s", "deg", "deg/s")
@@ -74,7 +74,7 @@ class Encoder:
         return vector
 
 
-@jitable(inline="always")  # on every tick of the batch engine: inlined into its tick loop
+@tick_kernel
 def encode_active(state, components, edges, offsets, out):
     """Write into `out` the index of the spiking input of each encoded variable: the interval is
     the number of interior edges <= value (lower-inclusive intervals)."""

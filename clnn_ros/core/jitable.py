@@ -20,3 +20,14 @@ def jitable(function: Callable | None = None, **options):
         MARKED.append((function, options))
         return function
     return mark if function is None else mark(function)
+
+
+# How the core's functions are compiled into the batch engine. Its tick loop runs without numba's
+# reference counting, which would cost more there than the tick's own work: the functions called
+# on every tick are inlined into it (tick_kernel), the others are compiled without reference
+# counting too (kernel; none of them makes an array).
+kernel = jitable(_nrt=False)
+
+
+def tick_kernel(function: Callable) -> Callable:
+    return jitable(function, inline="always")

@@ -27,67 +27,22 @@ Update, after the environment step (section 2.3, Figure 6):
 The rule is written once, as the functions below (`jitable`: plain Python when called
 from Python, compiled into the numba batch engine, clnn_ros.batch, which calls the same
 functions). Every option of the rule (tie_break, inference, tagging, e_flag, punish_timing,
-decay_counters, success_counter, rerandomize_*) is decided here and nowhere else. The classes at the end hold the state and call them, tick by tick.
+decay_counters, success_counter, rerandomize_*) is decided here and nowhere else; core.rule
+holds their values (Rule) and the reward kinds. The classes at the end hold the state and call
+them, tick by tick.
 """
 
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import numpy as np
 
-from .jitable import jitable
-from .params import TIE_BREAKS, Params
+from .jitable import jitable, kernel, tick_kernel
+from .params import Params
 from .random_stream import next_uniform
-
-NONE, REWARD, PUNISH = 0, 1, 2
-REWARD_KINDS = ("none", "reward", "punish")
-ONE_HOT = {NONE: (0, 0), REWARD: (1, 0), PUNISH: (0, 1)}  # the paper's R code
-TIE_EXACT, TIE_RANDOM = TIE_BREAKS.index("exact"), TIE_BREAKS.index("random")
-
-# How the rule's functions are compiled into the batch engine. Its tick loop runs without numba's
-# reference counting, which would cost more there than the rule's own work: the functions called
-# on every tick are inlined into it (tick_kernel), the others are compiled without reference
-# counting too (kernel; none of them makes an array).
-kernel = jitable(_nrt=False)
-
-
-def tick_kernel(function):
-    return jitable(function, inline="always")
-
-
-class Rule(NamedTuple):
-    """The constants and options of the learning rule, in the types the compiled code takes."""
-
-    sigma: int
-    omega: int
-    rho_plus: float
-    rho_minus: float
-    punish: float
-    w_max: float
-    tie_break: int  # an index into TIE_BREAKS
-    tag_both: bool  # tagging="both_neurons"
-    e_latched: bool  # e_flag="latched"
-    counter_per_trial: bool  # success_counter="per_trial"
-    ceiled: bool  # inference="ceiled"
-    punish_lag: int  # punish_timing: 0 "before_decay", 1 "after_decay" (ticks of decay first)
-    decay_per_trial: bool  # decay_counters="per_trial"
-    explore: float  # probability that the network WTA's winner is overruled
-    rerandomize_every: int  # trials; 0: never
-    rerandomize_fraction: float
-    w_base: float
-    rerandomize_range: float
-
-    @classmethod
-    def from_params(cls, p: Params) -> "Rule":
-        return cls(int(p.sigma), int(p.omega), float(p.rho_plus), float(p.rho_minus),
-                   float(p.punish), float(p.w_max), TIE_BREAKS.index(p.tie_break),
-                   p.tagging == "both_neurons", p.e_flag == "latched",
-                   p.success_counter == "per_trial", p.inference == "ceiled",
-                   int(p.punish_timing == "after_decay"), p.decay_counters == "per_trial",
-                   float(p.explore), int(p.rerandomize_every), float(p.rerandomize_fraction),
-                   float(p.w_base), float(p.rerandomize_range))
+# The rule's constants and options, as numbers (also imported from here by the rest)
+from .rule import NONE, ONE_HOT, PUNISH, REWARD, REWARD_KINDS, TIE_EXACT, TIE_RANDOM, Rule
 
 
 # ---- inference (section 2.2) -------------------------------------------------------------------
