@@ -30,7 +30,7 @@ from conftest import files_no_other_test_makes, free_domain_id, problem_lines
 pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 DOMAIN_ID = free_domain_id()
 FUZZER = Path(__file__).parents[1] / "scripts" / "fuzz_graph.py"
-# GraphNode.refusal_summary, logged once at exit:
+# Each node's refusal summary (graph.lockstep.Refusals.summary), logged once at exit:
 # "[WARN] [<time>] [<node>]: refused N messages: <topic> (<kind>) <count>, ..."
 SUMMARY = re.compile(r"\[WARN\] \[[^]]*\] \[([\w.]+)\]: refused (\d+) messages: (.*)$")
 PART = re.compile(r"(\S+) \((content|tick)\) (\d+)")

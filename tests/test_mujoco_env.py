@@ -1,4 +1,4 @@
-"""The MuJoCo cart-pole (clnn_ros/core/mujoco_physics.py, clnn_ros/nodes/mujoco_env.py): the
+"""The MuJoCo cart-pole (clnn_ros/core/mujoco_physics.py, the environment node with simulator:=mujoco): the
 plant's sign conventions and geometry, its agreement with the core's physics with the same
 constants, the contract checker on its node, and a `run_all --env mujoco` run equal to the core
 driving the same plant (docs/MUJOCO.md)."""

@@ -1,6 +1,6 @@
 """Gymnasium's CartPole-v1 physics behind the core's environment interface (CartPole's reset,
 step and state), so that the core, the batch-engine comparison and the gymnasium environment
-node (clnn_ros/nodes/gymnasium_env.py) all drive the very same simulator.
+node (clnn_ros/nodes/environment.py, simulator gymnasium) all drive the very same simulator.
 
 Gymnasium's own constants apply (those of GYM_PHYSICS below); the model's Params do not
 change them. Gymnasium keeps the state in radians (float64); the state seen by the encoder and

@@ -1,6 +1,6 @@
 """A cart-pole simulated by MuJoCo behind the core's environment interface (CartPole's reset, step
 and state), so that the core (`run_episode(seed, p, env_factory=MujocoCartPole)`) and the MuJoCo
-environment node (clnn_ros/nodes/mujoco_env.py) drive the very same plant.
+environment node (clnn_ros/nodes/environment.py, simulator mujoco) drive the very same plant.
 
 The plant is the MJCF model below, built with Gymnasium CartPole-v1's constants (GYM_PHYSICS):
 a 1.0 kg cart on a frictionless slide joint along x; on it a hinge about y (no damping, no
