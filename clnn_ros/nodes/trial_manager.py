@@ -15,9 +15,8 @@ What ends an episode early, with exit status 1 and the node to blame:
   are theirs to watch: they see the process exit; a paused one that drops out is alive);
 * another graph of the same node names in the same namespace and domain, seen before the first
   tick or within DISCOVERY_S of the trial manager's start (exit status NOT_STARTED: the run is
-  abandoned), or a second node of a graph name later; a node of `external_nodes` that does not
-  appear within `stall_timeout_s` once the rest of the graph is up (the others are waited for
-  as long as they take);
+  abandoned; later, a warning names it); a node of `external_nodes` that does not appear within
+  `stall_timeout_s` once the rest is up (the others are waited for as long as they take);
 * a foreign publisher on a graph topic (graph.watch), unless allow_foreign_publishers: then
   the run goes on and ends "tainted", exit status 1, never "completed".
 With a recorder it keeps the clock at most RECORDER_WINDOW ticks ahead of the recorder's
@@ -97,6 +96,7 @@ class TrialManagerNode(Node):
         self.stalled_s = 0.0  # running time of this node without progress
         self.not_started = False  # another graph of the same names runs
         self.tainted = None  # a foreign publisher seen on a graph topic
+        self.named_twice = set()  # graph names two nodes carried once the graph ran
         self.exit_reason = ""
         self.join = TickJoin((STATE, ACTION), self.on_tick, self.refusals)
         self.current = {topic: -1 for topic in CHAIN}  # the last tick each topic gave
@@ -210,8 +210,12 @@ class TrialManagerNode(Node):
                         f"{os.environ.get('ROS_DOMAIN_ID', '0') or '0'}: two nodes named "
                         f"{', '.join(twice)} (give each graph its own --namespace or "
                         f"ROS_DOMAIN_ID)")
-            return f"a second node named '{twice[0]}' joined namespace {namespace} at tick " \
-                   f"{self.join.tick}"
+            # A graph that starts beside this one abandons itself (above, in its own trial
+            # manager): this one goes on, and says what it saw.
+            for name in sorted(set(twice) - self.named_twice):
+                self.get_logger().warning(f"a second node named '{name}' joined namespace "
+                                          f"{namespace} at tick {self.join.tick}")
+            self.named_twice |= set(twice)
         if self.follows_recorder and RECORDER in self.in_graph:
             self.watch_recorder(bool(present[RECORDER]))
         self.in_graph |= {n for n in self.expected if present[n]}
