@@ -160,7 +160,10 @@ def _settle(lane, clock, kind, status, setting):
                         setting), False
 
 
-@numba.njit(cache=True, _nrt=False)
+# error_model="numpy": no test for a division by zero (a branch at each division); none can
+# happen (the physics divides by the total mass and by (4/3) M l - m l cos^2 > 0, the rule by
+# sigma and omega >= 1: Params validates them), so the results are the same.
+@numba.njit(cache=True, _nrt=False, error_model="numpy")
 def _tick(lane_a, clock_a, lane_b, clock_b, setting, both):
     """Lane a ticks, and with `both` lane b too, until one of them is to be settled (a reward or
     a punishment, or a trial's end): returns (clock, reward kind, status) of a, then of b. The
