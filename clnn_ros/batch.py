@@ -220,8 +220,8 @@ def _scratch(n_patterns, n_segments, n_inputs, n_vars):
             np.empty(n_vars, np.int64), response_space(n_segments))
 
 
-# No reference counting in the tick loop: it would cost more than the tick's own work. All the
-# arrays it uses are made by _run_many.
+# No reference counting here and in _tick: it would cost more than a tick's own work. All the
+# arrays they use are made by _run_many.
 @numba.njit(cache=True, _nrt=False)
 def _work(taken, episodes, setting, scratch_a, scratch_b):
     """One thread's work: seeds from the shared queue `taken`, two at a time (lanes a and b, each
