@@ -114,25 +114,25 @@ def ring_result(tm, ticks: int) -> None:
 
 def ring_composed(a) -> int:
     """All five ring nodes in one process, one executor."""
-    import rclpy
+    from clnn_ros.nodes.glue import NodeProcess
     from clnn_ros.rclpy_session import make_executor
-    rclpy.init()
-    nodes = {role: ring_node(role, a.msgs, a.ticks) for role in ROLES}
-    executor = make_executor()
-    for node in nodes.values():
-        executor.add_node(node)
-    tm = nodes["trial_manager"]
-    if not spin_until(executor, lambda: all(n.matched() for n in nodes.values()), 30):
-        print("ring: discovery timed out", file=sys.stderr)
-        return 1
-    tm.start()
-    ok = spin_until(executor, tm.finished.done, RUN_TIMEOUT_S)
-    if ok:
-        ring_result(tm, a.ticks)
-    executor.shutdown()
-    for node in nodes.values():
-        node.destroy_node()
-    rclpy.shutdown()
+    with NodeProcess([sys.argv[0]]) as process:
+        nodes = {role: ring_node(role, a.msgs, a.ticks) for role in ROLES}
+        executor = make_executor()
+        for node in nodes.values():
+            executor.add_node(node)
+        tm = nodes["trial_manager"]
+        if not spin_until(executor, lambda: all(n.matched() for n in nodes.values()), 30):
+            print("ring: discovery timed out", file=sys.stderr)
+            ok = False
+        else:
+            tm.start()
+            ok = spin_until(executor, tm.finished.done, RUN_TIMEOUT_S)
+        if ok:
+            ring_result(tm, a.ticks)
+        executor.shutdown()
+        for node in nodes.values():
+            process.destroy(node)
     return 0 if ok else 1
 
 
@@ -140,47 +140,46 @@ def ring_stage(a) -> int:
     """One ring node in this process. Each node announces on a latched topic once its
     publisher and subscriptions have matched; the trial manager starts when all have, and
     ends the run with a latched stop message."""
-    import rclpy
     from rclpy.duration import Duration
-    from clnn_ros.nodes.glue import READY_QOS
+    from clnn_ros.nodes.glue import READY_QOS, NodeProcess
     from clnn_ros.rclpy_session import make_executor
     from std_msgs.msg import String
 
-    rclpy.init()
-    node = ring_node(a.role, a.msgs, a.ticks)
-    executor = make_executor()
-    executor.add_node(node)
-    status = 0
-    if a.role == "trial_manager":
-        ready = set()
-        node.create_subscription(String, f"{RING_NS}/ready", lambda m: ready.add(m.data),
-                                 READY_QOS)
-        stop = node.create_publisher(String, f"{RING_NS}/stop", READY_QOS)
-        if not spin_until(executor, lambda: len(ready) == len(ROLES) - 1 and node.matched(), 30):
-            print(f"ring: discovery timed out (ready: {sorted(ready)})", file=sys.stderr)
-            status = 1
-        else:
-            node.start()
-            if spin_until(executor, node.finished.done, RUN_TIMEOUT_S):
-                ring_result(node, a.ticks)
-            else:
-                print(f"ring: stalled after {node.sent} ticks", file=sys.stderr)
+    with NodeProcess([sys.argv[0]]) as process:
+        node = ring_node(a.role, a.msgs, a.ticks)
+        executor = make_executor()
+        executor.add_node(node)
+        status = 0
+        if a.role == "trial_manager":
+            ready = set()
+            node.create_subscription(String, f"{RING_NS}/ready", lambda m: ready.add(m.data),
+                                     READY_QOS)
+            stop = node.create_publisher(String, f"{RING_NS}/stop", READY_QOS)
+            all_ready = lambda: len(ready) == len(ROLES) - 1 and node.matched()  # noqa: E731
+            if not spin_until(executor, all_ready, 30):
+                print(f"ring: discovery timed out (ready: {sorted(ready)})", file=sys.stderr)
                 status = 1
-        stop.publish(String(data="stop"))
-        stop.wait_for_all_acked(Duration(seconds=2.0))
-    else:
-        stopped = []
-        node.create_subscription(String, f"{RING_NS}/stop", stopped.append, READY_QOS)
-        ready = node.create_publisher(String, f"{RING_NS}/ready", READY_QOS)
-        announced = False
-        deadline = time.monotonic() + RUN_TIMEOUT_S + 30
-        while not stopped and time.monotonic() < deadline:
-            if not announced and node.matched():
-                ready.publish(String(data=a.role))
-                announced = True
-            executor.spin_once(timeout_sec=0.02 if not announced else 0.1)
-        status = 0 if stopped else 1
-    executor.shutdown()
-    node.destroy_node()
-    rclpy.shutdown()
+            else:
+                node.start()
+                if spin_until(executor, node.finished.done, RUN_TIMEOUT_S):
+                    ring_result(node, a.ticks)
+                else:
+                    print(f"ring: stalled after {node.sent} ticks", file=sys.stderr)
+                    status = 1
+            stop.publish(String(data="stop"))
+            stop.wait_for_all_acked(Duration(seconds=2.0))
+        else:
+            stopped = []
+            node.create_subscription(String, f"{RING_NS}/stop", stopped.append, READY_QOS)
+            ready = node.create_publisher(String, f"{RING_NS}/ready", READY_QOS)
+            announced = False
+            deadline = time.monotonic() + RUN_TIMEOUT_S + 30
+            while not stopped and time.monotonic() < deadline:
+                if not announced and node.matched():
+                    ready.publish(String(data=a.role))
+                    announced = True
+                executor.spin_once(timeout_sec=0.02 if not announced else 0.1)
+            status = 0 if stopped else 1
+        executor.shutdown()
+        process.destroy(node)
     return status

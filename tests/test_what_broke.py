@@ -121,16 +121,19 @@ def test_the_bag_holds_what_trials_csv_holds_or_says_what_it_lacks(short_lease, 
 
 FORGER = """
 import sys, time, rclpy
+from clnn_ros.nodes.glue import NodeProcess
 from clnn_ros_msgs.msg import SpikeVector
-rclpy.init()
-node = rclpy.create_node("forger")
-publisher = node.create_publisher(SpikeVector, "rln/spikes", 10)
-end = time.monotonic() + float(sys.argv[1])
-tick = 0
-while time.monotonic() < end:
-    publisher.publish(SpikeVector(tick=tick, spikes=[0, 0, 1, 0, 0, 0]))
-    tick += 1
-    time.sleep(0.01)
+# as a node of the graph's process: SIGINT ends the loop, and no Fast DDS file is left behind
+with NodeProcess(sys.argv) as process:
+    node = rclpy.create_node("forger")
+    publisher = node.create_publisher(SpikeVector, "rln/spikes", 10)
+    end = time.monotonic() + float(sys.argv[1])
+    tick = 0
+    while not process.signals and time.monotonic() < end:
+        publisher.publish(SpikeVector(tick=tick, spikes=[0, 0, 1, 0, 0, 0]))
+        tick += 1
+        time.sleep(0.01)
+    process.destroy(node)
 """
 
 
@@ -149,7 +152,7 @@ def test_a_foreign_publisher_is_named_and_the_run_never_reported_completed(
     try:
         stdout, stderr = process.communicate(timeout=HANG_S)
     finally:
-        forger.kill()
+        forger.send_signal(signal.SIGINT)
         forger.communicate(timeout=60)
     assert process.returncode == 1, stderr[-3000:]
     named = "a foreign publisher on rln/spikes: node 'forger' in namespace /"

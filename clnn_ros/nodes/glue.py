@@ -27,6 +27,7 @@ from ..graph.names import READY, TRIAL_EVENT
 from ..graph.run import (DESCRIPTIONS, declared_values, node_parameters, read_params_file,
                          names_list)
 from ..rclpy_session import qos_profile, ros_session, spin_until_finished, split_ros_arguments
+from ..rosenv import remove_unused_fast_dds_files, written_fast_dds_files
 
 LOCKSTEP_QOS = qos_profile(qos.LOCKSTEP)
 READY_QOS = qos_profile(qos.READY)
@@ -169,6 +170,35 @@ def deliver_published(node: Node) -> None:
             return
 
 
+class NodeProcess:
+    """A graph node's process: its rclpy session (rclpy_session.ros_session; `signals` are the
+    signals received) and, after its end, the removal of the Fast DDS files it wrote to that no
+    process uses any more. A peer that left while this process still sent to it (a killed one,
+    or one whose port this process re-created as it was removed) leaves its files behind, and
+    nobody else may be there to clean up (ros2 launch, a node started by hand)."""
+
+    def __init__(self, argv: list[str]):
+        self._session = ros_session(argv)
+        self._written: set[str] = set()
+        self.signals: list[int] = []
+
+    def __enter__(self) -> NodeProcess:
+        self.signals = self._session.__enter__()
+        return self
+
+    def destroy(self, node: Node) -> None:
+        """Destroy the node, noting first the files this process writes to: they are mapped
+        only while its DDS participant lives, and rclpy ends it with the process's last node."""
+        self._written |= written_fast_dds_files(os.getpid())
+        node.destroy_node()
+
+    def __exit__(self, *exc_info) -> None:
+        try:
+            self._session.__exit__(*exc_info)
+        finally:
+            remove_unused_fast_dds_files(self._written)
+
+
 def run_node(make_node: Callable[[dict], Node], argv: list[str] | None = None,
              on_interrupt: Callable[[Node], None] | None = None) -> int:
     """Run one node in its own process until its `finished` future is done; returns the exit
@@ -184,15 +214,15 @@ def run_node(make_node: Callable[[dict], Node], argv: list[str] | None = None,
         print(f"{prog}: error: unexpected arguments {unexpected}: a node takes ROS arguments "
               f"only, after --ros-args", file=sys.stderr)
         return 2
-    with ros_session(argv) as signals:
+    with NodeProcess(argv) as process:
         try:
             node = make_node(given_parameters(argv))
         except ParamError as error:
             print(f"{prog}: error: {error}", file=sys.stderr)
             return 2
         try:
-            spin_until_finished([node], node.finished, signals)
-            if signals:  # a requested shutdown is no failure (as ROS 2's own nodes)
+            spin_until_finished([node], node.finished, process.signals)
+            if process.signals:  # a requested shutdown is no failure (as ROS 2's own nodes)
                 if on_interrupt is not None:
                     on_interrupt(node)
                 return 0
@@ -200,15 +230,15 @@ def run_node(make_node: Callable[[dict], Node], argv: list[str] | None = None,
                 print(f"{prog}: error: {node.failure}", file=sys.stderr, flush=True)
             return node.finished.result()
         finally:
-            close_node(node)
+            close_node(node, process.destroy)
 
 
-def close_node(node: Node) -> None:
+def close_node(node: Node, destroy: Callable[[Node], None] = Node.destroy_node) -> None:
     """Log what the node refused, let its last messages reach their subscribers, destroy it."""
     if summary := node.refusals.summary():
         node.get_logger().warning(summary)
     deliver_published(node)
-    node.destroy_node()
+    destroy(node)
 
 
 def use_sim_time(node: Node, sim_time: bool = True) -> None:
