@@ -49,9 +49,6 @@ class TickRanges:
             gaps.append((expected, last))
         return gaps
 
-    def count(self) -> int:
-        return sum(last - first + 1 for first, last in self.ranges)
-
 
 def describe_ranges(ranges: list[tuple[int, int]], most: int = 3) -> str:
     """'1119-1614, 2000' (at most `most` ranges, then how many more)."""
