@@ -104,7 +104,6 @@ def spin_until_finished(nodes: list[Node], finished: Future, signals: list[int])
         executor.spin_once(timeout_sec=0.1)
 
 
-
 def make_executor(context=None):
     """rclpy's EventsExecutor, the fastest executor measured here (docs/ROS_GRAPH.md,
     docs/benchmark_graph.md); CLNN_ROS_EXECUTOR=single selects SingleThreadedExecutor instead
