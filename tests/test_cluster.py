@@ -77,6 +77,14 @@ def listening_addresses(pids: list[int]) -> set:
     return found
 
 
+def signal_each(pids: list[int], signum: int) -> None:
+    for pid in pids:
+        try:
+            os.kill(pid, signum)
+        except ProcessLookupError:
+            pass  # ended meanwhile
+
+
 def run_cli(tmp_path: Path, args: list[str], env: dict | None = None, **kwargs):
     """clnn-reproduce in a process of its own, marked as this test's (CLNN_TEST_RUN)."""
     env = {**os.environ, **(env or {}), "CLNN_TEST_RUN": str(tmp_path),
@@ -226,13 +234,18 @@ def test_ray_equals_local_and_ctrl_c_loses_only_the_units_in_flight(tmp_path):
 
     # Interrupted (Ctrl-C: SIGINT to its process group, as a terminal sends it) once the first
     # units are stored; meanwhile every socket of it and of its Ray listens on 127.0.0.1 only.
+    # Its processes are stopped while their sockets are looked at (a second or more on a loaded
+    # machine, in which the rest of the sweep finished once), and continue with the SIGINT.
     run = run_cli(tmp_path, [*SWEEP, "--ray", "--workers", "2", "--out", str(ray_out)],
                   start_new_session=True)
     deadline = time.monotonic() + HANG_S
     while not unit_files(ray_out) and run.poll() is None and time.monotonic() < deadline:
         time.sleep(0.02)
-    listening = listening_addresses(processes_of_test(tmp_path))
-    os.killpg(run.pid, signal.SIGINT)
+    processes = processes_of_test(tmp_path)
+    signal_each(processes, signal.SIGSTOP)
+    listening = listening_addresses(processes)
+    os.killpg(run.pid, signal.SIGINT)  # delivered as they continue
+    signal_each(processes, signal.SIGCONT)
     status, _, err = finished(run)
     assert status == 130 and err.strip().endswith("interrupted"), err
     assert "Traceback" not in err
