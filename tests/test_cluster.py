@@ -234,20 +234,26 @@ def test_ray_equals_local_and_ctrl_c_loses_only_the_units_in_flight(tmp_path):
 
     # Interrupted (Ctrl-C: SIGINT to its process group, as a terminal sends it) once the first
     # units are stored; meanwhile every socket of it and of its Ray listens on 127.0.0.1 only.
-    # Its processes are stopped while their sockets are looked at (a second or more on a loaded
-    # machine, in which the rest of the sweep finished once), and continue with the SIGINT.
+    # The driver, which stores the units, is stopped at once, then Ray's processes, while their
+    # sockets are looked at (a second or more on a loaded machine, time enough for the rest of
+    # the sweep: two fresh-clone suite runs saw it end with 0, not 130); all continue with the
+    # SIGINT.
     run = run_cli(tmp_path, [*SWEEP, "--ray", "--workers", "2", "--out", str(ray_out)],
                   start_new_session=True)
     deadline = time.monotonic() + HANG_S
     while not unit_files(ray_out) and run.poll() is None and time.monotonic() < deadline:
         time.sleep(0.02)
+    os.killpg(run.pid, signal.SIGSTOP)
     processes = processes_of_test(tmp_path)
     signal_each(processes, signal.SIGSTOP)
     listening = listening_addresses(processes)
+    stored_at_ctrl_c = len(unit_files(ray_out))
     os.killpg(run.pid, signal.SIGINT)  # delivered as they continue
     signal_each(processes, signal.SIGCONT)
+    os.killpg(run.pid, signal.SIGCONT)
     status, _, err = finished(run)
-    assert status == 130 and err.strip().endswith("interrupted"), err
+    assert status == 130 and err.strip().endswith("interrupted"), \
+        f"{stored_at_ctrl_c} units stored at the Ctrl-C, {len(unit_files(ray_out))} after; {err}"
     assert "Traceback" not in err
     assert listening and all(address.is_loopback for address in listening), listening
     assert_nothing_left(tmp_path)
