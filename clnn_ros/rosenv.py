@@ -3,6 +3,7 @@ user's own setting wins): DDS discovery stays on the loopback interface, and Fas
 the project's profile (fastdds_profile.xml: a shared-memory port outlives a paused process)."""
 
 import os
+import time
 from pathlib import Path
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -105,10 +106,39 @@ def unused_fast_dds_files(names: set[str] | None = None) -> set[str]:
     return candidates - shm_files_in_use()
 
 
+# A Fast DDS file is created, then mapped by its creator a moment later, and a new participant of
+# any domain may create a file of a name just found unused (the ports from 7000 up are the whole
+# machine's). So a file found unused that is younger than SETTLE_S is looked at again after it,
+# and a file is removed only if it is still the one found unused (the same inode).
+SETTLE_S = 1.0
+
+
 def remove_unused_fast_dds_files(names: set[str] | None = None) -> list[str]:
     """Remove the Fast DDS files (all, or `names`) that no process uses, as `fastdds shm clean`
-    does. Returns a line for each file that could not be removed (another user's, say)."""
-    return _remove(unused_fast_dds_files(names))
+    does, but none that a new participant is setting up (SETTLE_S). Returns a line for each
+    file that could not be removed (another user's, say)."""
+    found = _inodes(unused_fast_dds_files(names))
+    now = time.time()
+    youngest = max((changed for _, changed in found.values()), default=0.0)
+    if now - youngest < SETTLE_S:
+        time.sleep(SETTLE_S - (now - youngest))
+        still = _inodes(unused_fast_dds_files(set(found)))
+        found = {name: key for name, key in still.items()
+                 if key[0] == found[name][0]}
+    return _remove({name for name, (inode, _) in found.items()
+                    if _inodes({name}).get(name, (None,))[0] == inode})
+
+
+def _inodes(names: set[str]) -> dict[str, tuple[int, float]]:
+    """{name: (inode, time of its last change)} of those of `names` that exist."""
+    found = {}
+    for name in names:
+        try:
+            stat = os.stat(os.path.join(SHM, name))
+        except OSError:
+            continue  # removed meanwhile
+        found[name] = (stat.st_ino, max(stat.st_ctime, stat.st_mtime))
+    return found
 
 
 def _remove(names: set[str]) -> list[str]:

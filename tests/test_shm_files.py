@@ -8,7 +8,8 @@ import os
 import subprocess
 import sys
 
-from clnn_ros.rosenv import SHM, own_fast_dds_files, shm_files_of
+from clnn_ros.rosenv import (SETTLE_S, SHM, own_fast_dds_files, remove_unused_fast_dds_files,
+                             shm_files_of)
 
 READS = 1000
 # Holds a Fast DDS lock file open and opens and closes 20 other files at a time, without end.
@@ -42,3 +43,36 @@ def test_a_file_held_open_is_seen_at_every_read_though_others_close_meanwhile(tm
         for name in (segment, lock):
             os.unlink(os.path.join(SHM, name))
     assert (missed_own, missed_in_use) == (0, 0)
+
+
+# Creates a file, waits, then maps it: a participant setting up its port, slowed down.
+SLOW_CREATOR = """
+import mmap, os, sys, time
+fd = os.open(sys.argv[1], os.O_RDWR | os.O_CREAT, 0o644)
+os.ftruncate(fd, 4096)
+print("created", flush=True)
+time.sleep(float(sys.argv[2]))
+mapped = mmap.mmap(fd, 4096)
+print("mapped", flush=True)
+sys.stdin.read()
+"""
+
+
+def test_a_file_being_set_up_is_kept_and_an_old_unused_one_is_removed(tmp_path):
+    """A new file that its creator maps within SETTLE_S is not removed as unused (before,
+    removed at once: the port of a participant starting beside a run's cleanup); an unused file
+    is removed."""
+    name = f"fastrtps_clnn_test_{os.getpid()}_{tmp_path.name}"
+    path = os.path.join(SHM, name)
+    creator = subprocess.Popen([sys.executable, "-c", SLOW_CREATOR, path, str(SETTLE_S / 4)],
+                               stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert creator.stdout.readline() == "created\n"
+        assert remove_unused_fast_dds_files({name}) == []
+        assert os.path.exists(path)  # mapped meanwhile: in use
+        assert creator.stdout.readline() == "mapped\n"
+    finally:
+        creator.kill()
+        creator.wait()
+    assert remove_unused_fast_dds_files({name}) == []
+    assert not os.path.exists(path)  # unused once its creator ended: removed
