@@ -92,11 +92,22 @@ def remove_files_of_dead_process(names: set[str]) -> list[str]:
 
 def shm_files_in_use() -> set[str]:
     """Names under /dev/shm that some process has mapped or open. A Fast DDS file no process
-    uses is left over by a process that was killed (`fastdds shm clean` removes those)."""
-    used = set()
+    uses is left over by a process that was killed (`fastdds shm clean` removes those). Only
+    the processes that see this /dev/shm count (the same mount namespace): one with a /dev/shm
+    of its own (a container, a test's private one) has files of the same names (the ports from
+    7000 up), and its use of them kept this one's leftovers, measured."""
+    used, ours = set(), _mount_namespace("self")
     for pid in filter(str.isdigit, os.listdir("/proc")):
-        used |= shm_files_of(pid)
+        if _mount_namespace(pid) == ours:
+            used |= shm_files_of(pid)
     return used
+
+
+def _mount_namespace(pid: int | str) -> str | None:
+    try:
+        return os.readlink(f"/proc/{pid}/ns/mnt")
+    except OSError:
+        return None  # ended, or not ours to read
 
 
 def unused_fast_dds_files(names: set[str] | None = None) -> set[str]:

@@ -8,8 +8,10 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 from clnn_ros.rosenv import (SETTLE_S, SHM, own_fast_dds_files, remove_unused_fast_dds_files,
-                             shm_files_of)
+                             shm_files_in_use, shm_files_of)
 
 READS = 1000
 # Holds a Fast DDS lock file open and opens and closes 20 other files at a time, without end.
@@ -76,3 +78,27 @@ def test_a_file_being_set_up_is_kept_and_an_old_unused_one_is_removed(tmp_path):
         creator.wait()
     assert remove_unused_fast_dds_files({name}) == []
     assert not os.path.exists(path)  # unused once its creator ended: removed
+
+
+def test_a_file_of_the_same_name_in_another_dev_shm_does_not_keep_this_one(tmp_path,
+                                                                          in_private_shm):
+    """A process with a /dev/shm of its own maps a file of the same name: this /dev/shm's file
+    is still unused, and removed (before, kept: a run's ports from 7000 up stayed behind when a
+    run in another mount namespace used the same port numbers)."""
+    if not in_private_shm:
+        pytest.skip("no private /dev/shm can be made here")
+    name = f"fastrtps_clnn_test_{os.getpid()}_{tmp_path.name}"
+    path = os.path.join(SHM, name)
+    open(path, "w").close()
+    other = subprocess.Popen([*in_private_shm, sys.executable, "-c", SLOW_CREATOR, path, "0"],
+                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert other.stdout.readline() == "created\n"
+        assert other.stdout.readline() == "mapped\n"
+        assert name in shm_files_of(other.pid)  # its own file, by the same name
+        assert name not in shm_files_in_use()
+        assert remove_unused_fast_dds_files({name}) == []
+        assert not os.path.exists(path)
+    finally:
+        other.kill()
+        other.wait()
