@@ -407,6 +407,6 @@ def test_nodes_announce_again_while_the_graph_waits(ros_env, tmp_path):
                 process.wait(timeout=30)
         run.send_signal(signal.SIGINT)
         try:
-            run.wait(timeout=60)
+            run.wait(timeout=HANG_S)
         finally:
             end(run)

@@ -228,5 +228,5 @@ def test_a_second_graph_on_the_same_domain_and_namespace_is_refused(ros_env, tmp
         assert first.poll() is None  # the first run goes on
     finally:
         os.killpg(first.pid, signal.SIGINT)
-        first.communicate(timeout=30)
+        first.communicate(timeout=HANG_S)
     assert first.returncode == 130

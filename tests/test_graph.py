@@ -19,7 +19,7 @@ from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
 from clnn_ros.rosenv import fast_dds_shm_files, processes_with_env, unused_fast_dds_files
 
-from conftest import free_domain_id, ros_environment
+from conftest import HANG_S, free_domain_id, ros_environment
 
 pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 DOMAIN_ID = free_domain_id()
@@ -99,7 +99,7 @@ def test_ctrl_c_stops_everything(ros_env, tmp_path, in_private_shm):
         start_new_session=True)
     wait_for_line(process.stdout, "trial    2/")
     os.killpg(process.pid, signal.SIGINT)  # what a terminal does on Ctrl-C
-    stdout, stderr = process.communicate(timeout=30)
+    stdout, stderr = process.communicate(timeout=HANG_S)
     assert process.returncode == 130, stderr
     assert "run_all: interrupted" in stderr and "Traceback" not in stderr
     if in_private_shm:

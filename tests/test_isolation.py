@@ -32,7 +32,7 @@ from clnn_ros.lab.two_hosts import veth_link
 from test_graph import processes_with, read_steps, wait_for_line
 from test_recording import assert_every_tick, raw_messages
 
-from conftest import free_domain_id
+from conftest import HANG_S, free_domain_id
 
 DOMAIN_IDS = [free_domain_id(), free_domain_id()]
 TRIALS, MAX_STEPS = 8, 1500
@@ -88,7 +88,7 @@ def run_graphs(link, runs) -> int:
             process.wait(timeout=max(0.0, deadline - time.monotonic()))
         except subprocess.TimeoutExpired:
             process.send_signal(signal.SIGINT)  # run_all stops its graph and says where it was
-            process.wait(timeout=30)
+            process.wait(timeout=HANG_S)
         assert process.returncode == 0, (out / "run_all.log").read_text()[-3000:]
     return link.packets(0)[0] - sent_before
 
@@ -227,7 +227,7 @@ def test_ctrl_c_across_the_link_removes_everything(base_env, tmp_path):
         wait_for_line(process.stdout, "trial    2/")  # its episode is under way
     finally:
         os.killpg(process.pid, signal.SIGINT)  # what a terminal does on Ctrl-C
-        process.communicate(timeout=30)
+        process.communicate(timeout=HANG_S)
         stderr = stderr_file.read_text()
         print(stderr)  # shown if the waits failed
     assert process.returncode == 130, stderr

@@ -26,7 +26,7 @@ from clnn_ros.graph.names import STATE
 
 from test_graph import processes_with, wait_for_line
 
-from conftest import free_domain_id, ros_environment
+from conftest import HANG_S, free_domain_id, ros_environment
 
 DOMAIN_ID = free_domain_id()
 REPO = Path(__file__).resolve().parents[1]
@@ -352,7 +352,7 @@ def test_echo_topics_then_ctrl_c_leaves_a_complete_bag(ros_env, tmp_path):
     assert bad_field.returncode == 1 and "no_such_field" in bad_field.stderr
 
     os.killpg(process.pid, signal.SIGINT)
-    _, stderr = process.communicate(timeout=30)
+    _, stderr = process.communicate(timeout=HANG_S)
     assert process.returncode == 130 and "Traceback" not in stderr, stderr
     messages = raw_messages(tmp_path / "bag")  # finished: summary and index present
     assert assert_every_tick(messages) > 50
@@ -429,7 +429,7 @@ def test_killed_recorders_bag_is_repaired(ros_env, tmp_path, moment):
         progress.stop()
     time.sleep(0.5)
     os.killpg(process.pid, signal.SIGINT)
-    stdout, stderr = process.communicate(timeout=30)
+    stdout, stderr = process.communicate(timeout=HANG_S)
     assert "node 'recorder' died (SIGKILL)" in stderr, stderr
     assert not (broken / "metadata.yaml").exists()
     with pytest.raises(bag.BagError, match="truncated"):
