@@ -12,6 +12,10 @@ os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE",
 
 
 SHM = "/dev/shm"
+# Set by a supervisor (run_all) that removes its processes' leftover Fast DDS files itself: a
+# node process then leaves the removal to it and ends sooner (a scan of every process and up to
+# SETTLE_S of waiting, which counted against its grace to exit on a loaded machine).
+SHM_CLEANED_BY_SUPERVISOR = "CLNN_ROS_SHM_CLEANED_BY_SUPERVISOR"
 
 
 def fast_dds_shm_files() -> set[str]:

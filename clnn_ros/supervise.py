@@ -27,8 +27,9 @@ from pathlib import Path
 from .graph.names import GRAPH_NODES, RECORDER, TRIAL_MANAGER
 from .graph.run import node_arguments, write_params
 from .process_signals import EXIT_WITH_STDIN
-from .rosenv import (own_fast_dds_files, remove_files_of_dead_process,
-                     remove_unused_fast_dds_files, written_fast_dds_files)
+from .rosenv import (SHM_CLEANED_BY_SUPERVISOR, own_fast_dds_files,
+                     remove_files_of_dead_process, remove_unused_fast_dds_files,
+                     written_fast_dds_files)
 
 NODES = (*GRAPH_NODES, TRIAL_MANAGER)
 # After the episode ends or Ctrl-C, how long the nodes get to exit by themselves, and then the
@@ -222,7 +223,7 @@ class Supervisor:
 # --- the graph's processes -------------------------------------------------------------
 
 def child_environment() -> dict:
-    return {**os.environ, EXIT_WITH_STDIN: "1"}
+    return {**os.environ, EXIT_WITH_STDIN: "1", SHM_CLEANED_BY_SUPERVISOR: "1"}
 
 
 def run_separate(supervisor: Supervisor, values: dict, workdir: Path,

@@ -243,6 +243,9 @@ def test_ray_equals_local_and_ctrl_c_loses_only_the_units_in_flight(tmp_path):
     deadline = time.monotonic() + HANG_S
     while not unit_files(ray_out) and run.poll() is None and time.monotonic() < deadline:
         time.sleep(0.02)
+    if run.poll() is not None:
+        pytest.fail(f"the sweep ended with {run.returncode} before it stored a unit: "
+                    f"{run.communicate()[1][-3000:]}")
     os.killpg(run.pid, signal.SIGSTOP)
     processes = processes_of_test(tmp_path)
     signal_each(processes, signal.SIGSTOP)

@@ -291,12 +291,14 @@ def child(process, module: str) -> int:
 
 def listed_topics(env, wanted: set[str], *args) -> set[str]:
     """clnn_ros.topics' lines once they include `wanted`: it lists what discovery has found once
-    it settled, and a run's participants may still be starting."""
-    deadline, lines = time.monotonic() + 60, set()
+    it settled, and a run's participants may still be starting. On a loaded machine discovery
+    can take over 10 s (clnn_ros.topics.DEFAULT_WAIT_S)."""
+    deadline, lines = time.monotonic() + HANG_S, set()
     while not wanted <= lines and time.monotonic() < deadline:
         listed = tool(env, "clnn_ros.topics", *args)
         assert listed.returncode == 0, listed.stderr
         lines = set(listed.stdout.splitlines())
+    assert wanted <= lines, f"never listed: {sorted(wanted - lines)}; last: {listed.stderr}"
     return lines
 
 

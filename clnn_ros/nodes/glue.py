@@ -27,7 +27,8 @@ from ..graph.names import READY, TRIAL_EVENT
 from ..graph.run import (DESCRIPTIONS, declared_values, node_parameters, read_params_file,
                          names_list)
 from ..rclpy_session import qos_profile, ros_session, spin_until_finished, split_ros_arguments
-from ..rosenv import remove_unused_fast_dds_files, written_fast_dds_files
+from ..rosenv import (SHM_CLEANED_BY_SUPERVISOR, remove_unused_fast_dds_files,
+                      written_fast_dds_files)
 
 LOCKSTEP_QOS = qos_profile(qos.LOCKSTEP)
 READY_QOS = qos_profile(qos.READY)
@@ -175,10 +176,12 @@ class NodeProcess:
     signals received) and, after its end, the removal of the Fast DDS files it wrote to that no
     process uses any more. A peer that left while this process still sent to it (a killed one,
     or one whose port this process re-created as it was removed) leaves its files behind, and
-    nobody else may be there to clean up (ros2 launch, a node started by hand)."""
+    nobody else may be there to clean up (ros2 launch, a node started by hand); under run_all
+    (rosenv.SHM_CLEANED_BY_SUPERVISOR) run_all removes them."""
 
     def __init__(self, argv: list[str]):
         self._session = ros_session(argv)
+        self._cleans_up = os.environ.get(SHM_CLEANED_BY_SUPERVISOR) != "1"
         self._written: set[str] = set()
         self.signals: list[int] = []
 
@@ -189,14 +192,16 @@ class NodeProcess:
     def destroy(self, node: Node) -> None:
         """Destroy the node, noting first the files this process writes to: they are mapped
         only while its DDS participant lives, and rclpy ends it with the process's last node."""
-        self._written |= written_fast_dds_files(os.getpid())
+        if self._cleans_up:
+            self._written |= written_fast_dds_files(os.getpid())
         node.destroy_node()
 
     def __exit__(self, *exc_info) -> None:
         try:
             self._session.__exit__(*exc_info)
         finally:
-            remove_unused_fast_dds_files(self._written)
+            if self._written:
+                remove_unused_fast_dds_files(self._written)
 
 
 def run_node(make_node: Callable[[dict], Node], argv: list[str] | None = None,
