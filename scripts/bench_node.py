@@ -4,7 +4,10 @@ classes, measured through their public attributes, so that the nodes themselves 
     python scripts/bench_node.py ROLE [--ticks-file F] [--profile F] --ros-args ...
         one node process, as `python -m clnn_ros.nodes.ROLE` (clnn_ros.nodes.glue.run_node);
     python scripts/bench_node.py composed --values F [--ticks-file F] [--profile F]
-        the five nodes on one executor, as `run_all --composed`, given the run's values (JSON).
+                                 [--sim-time-everywhere]
+        the five nodes on one executor, as `run_all --composed`, given the run's values (JSON);
+        --sim-time-everywhere: the nodes that run on their own time by default (OWN_TIME_ROLES)
+        with use_sim_time true, as a node process gets it from -p use_sim_time:=true.
 
 --ticks-file (the trial manager): when it publishes each clock(t) (its clock_pub) and when its
 TickJoin holds state(t) and action(t) (its join's completion, before on_tick), written as
@@ -23,6 +26,8 @@ import sys
 import time
 from pathlib import Path
 from typing import Callable
+
+from bench_settings import OWN_TIME_ROLES
 
 # The lockstep output of each node: its first publication starts a node process's profile.
 OUTPUTS = {"environment": "state_pub", "encoder": "spikes_pub", "reward": "reward_pub",
@@ -106,15 +111,21 @@ def run_process(role: str, ticks_file: Path | None, profile_file: Path | None,
     return status
 
 
-def run_composed(values: dict, ticks_file: Path | None, profile_file: Path | None) -> int:
+def run_composed(values: dict, ticks_file: Path | None, profile_file: Path | None,
+                 sim_time_everywhere: bool = False) -> int:
+    from rclpy.parameter import Parameter
+
     from clnn_ros.nodes.glue import NodeProcess, close_node
     from clnn_ros.rclpy_session import spin_until_finished
+
+    sim_time = dict(parameter_overrides=[Parameter("use_sim_time", value=True)])
 
     with NodeProcess([sys.argv[0]]) as process:
         nodes = []
         try:
             for role in ("environment", "encoder", "reward", "agent", "trial_manager"):
-                nodes.append(node_class(role)(values))
+                nodes.append(node_class(role)(values, **(
+                    sim_time if sim_time_everywhere and role in OWN_TIME_ROLES else {})))
             manager = nodes[-1]
             times = TickTimes(manager) if ticks_file else None
             if profile_file:
@@ -155,9 +166,12 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--ticks-file", type=Path)
     parser.add_argument("--profile", type=Path)
     parser.add_argument("--values", type=Path, help="composed: the run's values (JSON)")
+    parser.add_argument("--sim-time-everywhere", action="store_true",
+                        help="composed: OWN_TIME_ROLES with use_sim_time true as well")
     a = parser.parse_args(argv[:split])
     if a.role == "composed":
-        return run_composed(json.loads(a.values.read_text()), a.ticks_file, a.profile)
+        return run_composed(json.loads(a.values.read_text()), a.ticks_file, a.profile,
+                            a.sim_time_everywhere)
     return run_process(a.role, a.ticks_file, a.profile, argv[split:])
 
 

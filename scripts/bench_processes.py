@@ -11,7 +11,8 @@ import sys
 import time
 from pathlib import Path
 
-from bench_settings import REPO, ROLES, RUN_TIMEOUT_S, SEED, TEARDOWN_GRACE_S
+from bench_settings import (OWN_TIME_ROLES, REPO, ROLES, RUN_TIMEOUT_S, SEED,
+                            TEARDOWN_GRACE_S)
 
 NODE_ENTRY = REPO / "scripts" / "bench_node.py"
 BENCHMARK = REPO / "scripts" / "benchmark_graph.py"
@@ -75,12 +76,13 @@ class Bench:
         return self.work / f"{name}_{time.monotonic_ns()}"
 
     def graph_run(self, layout: str, executor: str, trials: int,
-                  profile: Path | None = None) -> dict:
+                  profile: Path | None = None, sim_time_everywhere: bool = False) -> dict:
         """One episode of the graph without the recorder, as `run_all --quiet --no-record`
         runs it (the run's values and node arguments from clnn_ros.graph.run; the trial manager
         started last); its summary.json, with the per-tick latencies in microseconds
         ("latency_us") unless profiled (`profile`: a file for the composed run, a folder of
-        ROLE.prof for the node processes)."""
+        ROLE.prof for the node processes). `sim_time_everywhere`: OWN_TIME_ROLES started with
+        use_sim_time true as well."""
         from clnn_ros.graph.run import DEMO, node_arguments, run_values, write_params
 
         out = self.out_dir(f"graph_{layout}_{executor}")
@@ -95,12 +97,15 @@ class Bench:
             values_file = out / "values.json"
             values_file.write_text(json.dumps(values))
             commands = [entry + ["composed", "--values", str(values_file), *timing]
-                        + (["--profile", str(profile)] if profile else [])]
+                        + (["--profile", str(profile)] if profile else [])
+                        + (["--sim-time-everywhere"] if sim_time_everywhere else [])]
         else:
             arguments = node_arguments(write_params(out / "params.yaml", values), "/")
             commands = [entry + [role, *(timing if role == "trial_manager" else []),
                                  *(["--profile", str(profile / f"{role}.prof")] if profile
-                                   else []), *arguments]
+                                   else []), *arguments,
+                                 *(["-p", "use_sim_time:=true"]
+                                   if sim_time_everywhere and role in OWN_TIME_ROLES else [])]
                         for role in ROLES]
         run_group(commands, child_env(CLNN_ROS_EXECUTOR=executor), RUN_TIMEOUT_S)
         summary = json.loads((out / "summary.json").read_text())

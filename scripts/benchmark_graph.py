@@ -4,7 +4,7 @@ environment (as a robot runs it), idle and under CPU hogs, and a profile of the 
 
     ROS_DOMAIN_ID=N python scripts/benchmark_graph.py [--out docs/benchmark_graph.md] [--quick]
 
-About 5 minutes (--quick: about 1.5 minutes, one run of each with fewer ticks, a smoke test;
+About 6 minutes (--quick: about 2 minutes, one run of each with fewer ticks, a smoke test;
 it prints the report and writes it only with --out). The ROS domain is the environment's
 ROS_DOMAIN_ID (ROS's default 0 when unset; give the benchmark a domain of its own), DDS discovery
 stays on loopback (clnn_ros.rosenv's defaults apply to every process started here: the graph's,
@@ -30,7 +30,9 @@ the ring's, the benchmark's own).
    CLNN_ROS_EXECUTOR). EventsExecutor (the
    default) and rclpy's SingleThreadedExecutor (CLNN_ROS_EXECUTOR=single). Every configuration
    runs REPEATS times, round robin; the best (highest) rate counts, the least disturbed by other
-   load on the machine, with the range of all runs.
+   load on the machine, with the range of all runs. With the EventsExecutor also the graph with
+   sim time in every node (bench_settings.OWN_TIME_ROLES started with use_sim_time true, as
+   before 2026-12-03): what rclpy's TimeSource and its /clock deliveries cost.
 2. Per-tick latency of the graph, from the same graph runs: in the trial manager, the wall
    time from publishing clock(t) to holding state(t) and action(t) (one tick's whole round trip
    through the graph), timed by bench_node.py through the trial manager's public attributes:
@@ -81,10 +83,11 @@ def main_benchmark(a) -> int:
     t_start = time.perf_counter()
     load_before = os.getloadavg()
     repeats = sizes["repeats"]
-    # (layout, executor, what): the graph, the UInt64 ring, the typed ring (EventsExecutor)
+    # (layout, executor, what): the graph, the UInt64 ring, and with the EventsExecutor the typed
+    # ring and the graph with sim time in every node ("graph_sim")
     configs = [(layout, executor, what) for executor in EXECUTORS for layout in LAYOUTS
-               for what in ("graph", "uint64", "typed")
-               if not (what == "typed" and executor == "single")]
+               for what in ("graph", "uint64", "typed", "graph_sim")
+               if not (what in ("typed", "graph_sim") and executor == "single")]
     rates = {c: [] for c in configs}
     ticks, latencies = {}, {}
     spent = dict.fromkeys(EXECUTORS, 0.0)  # seconds of this run per executor's rows
@@ -100,6 +103,9 @@ def main_benchmark(a) -> int:
                     s = bench.graph_run(layout, executor, sizes["graph_trials"][executor])
                     ticks[c] = s["ticks"]
                     latencies.setdefault(c, []).extend(s["latency_us"])
+                elif what == "graph_sim":
+                    s = bench.graph_run(layout, executor, sizes["graph_trials"][executor],
+                                        sim_time_everywhere=True)
                 else:
                     s = bench.ring_rate(layout, executor, what)
                 rates[c].append(s["ticks_per_s"])
@@ -114,7 +120,7 @@ def main_benchmark(a) -> int:
                            ticks=ticks[(layout, executor, "graph")],
                            latency=percentiles(latencies[(layout, executor, "graph")]),
                            samples=len(latencies[(layout, executor, "graph")]))
-                for what in ("graph", "uint64", "typed"):
+                for what in ("graph", "uint64", "typed", "graph_sim"):
                     r = rates.get((layout, executor, what), [])
                     row[what] = (max(r), r) if r else None
                 rows.append(row)

@@ -79,13 +79,14 @@ def test_a_read_only_parameter_is_refused_with_a_reason(agent_by_hand):
                   GetParameters.Request(names=["sigma", "use_sim_time", "seed",
                                                "segments"])).values
     assert [values[0].integer_value, values[1].bool_value, values[2].integer_value] == \
-        [128, True, 3]  # unchanged; the node follows the graph's clock
+        [128, False, 3]  # unchanged; the agent reads no ROS time: its own clock by default
     assert values[3].integer_value == 3  # not given: the paper's count for 1 SV, shown as such
     sim_time = SetParameters.Request(parameters=[ParameterMsg(
         name="use_sim_time", value=ParameterValue(type=ParameterType.PARAMETER_BOOL,
-                                                  bool_value=False))])
+                                                  bool_value=True))])
     result = call(agent_by_hand, SetParameters, "/agent/set_parameters", sim_time).results[0]
     assert not result.successful and "use_sim_time is read-only" in result.reason
+    assert result.reason.endswith("runs on its own time")
 
 
 def test_parameters_describe_their_meaning_and_constraints(agent_by_hand):
@@ -108,7 +109,8 @@ def test_a_node_declares_only_the_parameters_it_uses(ros_env, node):
     and ignores the run's other values: `ros2 param list /encoder` shows no sigma."""
     process = subprocess.Popen([sys.executable, "-m", f"clnn_ros.nodes.{node}", "--ros-args",
                                 "-r", f"__ns:=/only_{node}", "-p", "sigma:=128",
-                                "-p", "physics:=correct"], env=ros_env,
+                                "-p", "physics:=correct", "-p", "use_sim_time:=true"],
+                               env=ros_env,
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=int(DOMAIN_ID))
@@ -116,6 +118,8 @@ def test_a_node_declares_only_the_parameters_it_uses(ros_env, node):
     try:
         listed = call(client, ListParameters, f"/only_{node}/{node}/list_parameters",
                       ListParameters.Request()).result.names
+        sim_time = call(client, GetParameters, f"/only_{node}/{node}/get_parameters",
+                        GetParameters.Request(names=["use_sim_time"])).values[0].bool_value
     finally:
         client.destroy_node()
         context.try_shutdown()
@@ -125,6 +129,7 @@ def test_a_node_declares_only_the_parameters_it_uses(ros_env, node):
     assert set(listed) - builtin == set(NODE_PARAMETERS[node]) | ({"segments"} if node == "agent"
                                                                   else set())
     assert "physics" not in listed and ("sigma" in listed) == (node == "agent")
+    assert sim_time  # sim time on request at the start, for a user who wants the graph's clock
 
 
 def test_two_graphs_in_two_namespaces_on_one_domain(ros_env, tmp_path):

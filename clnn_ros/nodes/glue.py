@@ -35,6 +35,7 @@ READY_QOS = qos_profile(qos.READY)
 PROGRESS_QOS = qos_profile(qos.PROGRESS)
 LABELS_QOS = qos_profile(qos.LABELS)
 ACK_WAIT_S = 2.0  # a node's last messages reach the recorder before the node exits (or this)
+RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")  # rclpy applies these
 
 
 def steady_clock() -> Clock:
@@ -74,7 +75,7 @@ def descriptor(name: str, text: str | None = None) -> ParameterDescriptor:
 def given_parameters(argv: list[str]) -> dict:
     """The parameter values of a node's command line, as rcl applies them: its --params-file
     sections (every node's: the run's description gives all nodes the same values) and -p
-    rules, a later one over an earlier."""
+    rules, a later one over an earlier; rclpy's own parameters left to rclpy."""
     tokens, values = split_ros_arguments(argv)[0], {}
     for option, value in zip(tokens, tokens[1:]):
         if option == "--params-file":
@@ -82,7 +83,7 @@ def given_parameters(argv: list[str]) -> dict:
         elif option in ("-p", "--param"):
             name, _, text = value.partition(":=")
             values[name] = parameter_value_to_python(get_parameter_value(text))
-    return values
+    return {name: value for name, value in values.items() if name not in RCLPY_PARAMETERS}
 
 
 def checked(topic: str, params: Params, refusals: Refusals, callback: Callable):
@@ -246,16 +247,21 @@ def close_node(node: Node, destroy: Callable[[Node], None] = Node.destroy_node) 
     destroy(node)
 
 
-def use_sim_time(node: Node, sim_time: bool = True) -> None:
-    """The node's time is the graph's sim time (/clock, from the trial manager), or its own
-    (the trial manager's, the recorder's), for the whole run: a later change of use_sim_time
-    is refused, as every other parameter is (read-only)."""
+def use_sim_time(node: Node, sim_time: bool = False) -> None:
+    """The node's ROS time for the whole run: the graph's sim time (/clock, from the trial
+    manager) if `sim_time` (the environment: the contract of docs/ENV_CONTRACT.md) or if it was
+    started with -p use_sim_time:=true, its own time otherwise. The encoder, reward and agent
+    read no ROS time (every stamp comes from a message's tick), and the /clock delivery that
+    rclpy's TimeSource takes for use_sim_time cost about a sixth of the CPU of a tick
+    (docs/benchmark_graph.md). A later change of use_sim_time is refused, as every other
+    parameter is (read-only)."""
     if sim_time:
         node.set_parameters([Parameter("use_sim_time", Parameter.Type.BOOL, True)])
+    runs_on = ("the graph's sim time" if node.get_parameter("use_sim_time").value
+               else "its own time")
 
     def refuse_use_sim_time(parameters) -> SetParametersResult:
         changed = any(parameter.name == "use_sim_time" for parameter in parameters)
         return SetParametersResult(successful=not changed, reason=(
-            f"use_sim_time is read-only: the node runs on the graph's "
-            f"{'sim' if sim_time else 'own'} time") if changed else "")
+            f"use_sim_time is read-only: the node runs on {runs_on}") if changed else "")
     node.add_on_set_parameters_callback(refuse_use_sim_time)
