@@ -453,8 +453,9 @@ def test_killed_recorders_bag_is_repaired(ros_env, tmp_path, moment):
     assert info["message_count"] == len(messages) == len(raw_messages(broken, salvage=True))
     last = assert_every_tick(messages)
     assert last + 1 == sum(chunks)  # every complete chunk, nothing else
-    if early:
-        assert len(chunks) <= 3, chunks
+    if early:  # earlier than the other moment; how many chunks is up to the scheduler: beside
+        # another worker's graph this test noticed the first chunk over a second late (4 chunks)
+        assert sum(chunks) < 3000, chunks
     else:
         assert held - last <= 2 * max(chunks) + 50, (held, last, chunks)  # + progress' lag
         result = subprocess.run([sys.executable, "-m", "clnn_ros.analyze", str(broken), "--out",
