@@ -87,6 +87,15 @@ def written_fast_dds_files(pid: int | str) -> set[str]:
     return _with_companions(bases)
 
 
+def domain_port_files(domain_id: int) -> set[str]:
+    """The Fast DDS port files of ROS domain `domain_id` that exist, with their lock files and
+    mutex: Fast DDS numbers a domain's ports 7400 + 250 x domain + 0..249."""
+    first = 7400 + 250 * domain_id
+    return _with_companions({name for name in fast_dds_shm_files()
+                             if name.startswith("fastrtps_port") and name[13:].isdigit()
+                             and first <= int(name[13:]) < first + 250})
+
+
 def remove_files_of_dead_process(names: set[str]) -> list[str]:
     """Remove a dead process's own Fast DDS files at once, though its peers still map them: a
     peer that opens such a port again then creates a fresh one instead of waiting for the
