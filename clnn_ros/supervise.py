@@ -26,7 +26,7 @@ from pathlib import Path
 
 from .graph.names import GRAPH_NODES, RECORDER, TRIAL_MANAGER
 from .graph.run import node_arguments, write_params
-from .process_signals import EXIT_WITH_STDIN
+from .process_signals import EXIT_WITH_STDIN, SHOW_STACKS
 from .rosenv import (SHM_CLEANED_BY_SUPERVISOR, own_fast_dds_files,
                      remove_files_of_dead_process, remove_unused_fast_dds_files,
                      written_fast_dds_files)
@@ -42,6 +42,7 @@ _STDERR = threading.Lock()
 # for its last messages' acknowledgements (nodes.glue.ACK_WAIT_S, 2 s: a killed subscriber
 # never acknowledges) and its participant's deletion.
 TERMINATE_S = 5.0
+STACKS_S = 0.5  # for a child's stacks (SHOW_STACKS) to reach its stderr
 SAMPLE_S = 0.5  # how often the children's shared-memory files are noted
 # "<prog>: error: <message>" (the project's one-line errors) or a ROS log line at ERROR.
 OWN_ERROR = re.compile(r"^(?:\S+: error: |\[ERROR\] \[[\d.]+\] \[[^\]]+\]: )(.*)$")
@@ -57,8 +58,9 @@ def say(line: str) -> None:
 class Child:
     """One process of the run."""
 
-    def __init__(self, name: str, command: list[str], env: dict):
+    def __init__(self, name: str, command: list[str], env: dict, shows_stacks: bool):
         self.name = name
+        self.shows_stacks = shows_stacks  # on SHOW_STACKS (process_signals.catch_signals)
         self.tail = deque(maxlen=TAIL_LINES)
         self.shm_files: set[str] = set()  # its own Fast DDS files, noted while it runs
         self.process = subprocess.Popen(command, stdin=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -131,8 +133,10 @@ class Supervisor:
         self._sampler = threading.Thread(target=self._sample, daemon=True, name="shm-sampler")
         self._sampler.start()
 
-    def start(self, name: str, command: list[str], env: dict) -> Child:
-        self.children[name] = child = Child(name, command, env)
+    def start(self, name: str, command: list[str], env: dict, shows_stacks: bool = False) -> Child:
+        """A child; `shows_stacks`: it prints its stacks on SHOW_STACKS (a node of this package,
+        not an --env-node command of one's own, on which the signal could end the process)."""
+        self.children[name] = child = Child(name, command, env, shows_stacks)
         self._tell_janitor(f"pid {child.process.pid}")
         return child
 
@@ -197,6 +201,10 @@ class Supervisor:
         for child in chosen:
             if child.wait(deadline - time.monotonic()):
                 continue
+            if child.shows_stacks:  # where it hangs, in the run's log
+                say(f"run_all: node {child.name} is slow to exit; the stacks of its threads:")
+                child.signal(SHOW_STACKS)
+                child.wait(STACKS_S)
             child.signal(signal.SIGTERM)
             if child.wait(TERMINATE_S):
                 forced.append((child.name, "terminated"))
@@ -239,7 +247,9 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
         command = env_command if name == "environment" else \
             [sys.executable, "-m", f"clnn_ros.nodes.{name}"]
         if command is not None:
-            supervisor.start(name, [*command, *arguments], child_environment())
+            supervisor.start(name, [*command, *arguments], child_environment(),
+                             shows_stacks=command[:2] == [sys.executable, "-m"] and
+                             command[2].startswith("clnn_ros."))
     manager = supervisor.children[TRIAL_MANAGER]
     failure, ended_at, outcome, status, quit_at = None, None, None, None, None
     while manager.returncode is None and not interrupted:
@@ -316,7 +326,8 @@ def start_recorder(supervisor: Supervisor, values: dict, bag_path: Path, workdir
     params_file = write_params(workdir / "recorder_params.yaml", {
         **values, "bag_path": str(bag_path), "environment": environment})
     supervisor.start(RECORDER, [sys.executable, "-m", "clnn_ros.nodes.recorder",
-                                *node_arguments(params_file, namespace)], child_environment())
+                                *node_arguments(params_file, namespace)], child_environment(),
+                     shows_stacks=True)
 
 
 def stop_recorder(supervisor: Supervisor, episode_ended: bool) -> bool:

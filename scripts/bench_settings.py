@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from clnn_ros.graph.names import GRAPH_NODES, SIM_TIME_NODES
+
 REPO = Path(__file__).resolve().parents[1]
 SEED = 1
 # Seed 1, 1 SV: a trial is about 270 ticks; 30 trials = 8402 ticks, 8 = 1912, 6 = 1381,
@@ -50,12 +52,11 @@ NEEDS = {
     "trial_manager": (("state", 1), ("action", 1)),
 }
 RING_NS = "/bench_ring"
-# The graph's nodes with use_sim_time (the environment), whose rclpy TimeSource subscribes
-# /clock as well.
-TIME_SOURCES = 1
+# The graph's nodes with use_sim_time, whose rclpy TimeSource subscribes /clock as well.
+TIME_SOURCES = len(SIM_TIME_NODES)
 # The nodes that run on their own time by default; the "sim time everywhere" runs start them
 # with -p use_sim_time:=true (every node ran so until 2026-12-03), to measure what it costs.
-OWN_TIME_ROLES = ("encoder", "reward", "agent")
+OWN_TIME_ROLES = tuple(node for node in GRAPH_NODES if node not in SIM_TIME_NODES)
 TYPE_NAMES = {"clock": "rosgraph_msgs/Clock", "state": "clnn_ros_msgs/CartPoleState",
               "spikes": "clnn_ros_msgs/SpikeVector", "reward": "clnn_ros_msgs/Reward",
               "action": "clnn_ros_msgs/Action"}

@@ -58,8 +58,8 @@ from rosgraph_msgs.msg import Clock
 from clnn_ros.core.params import ParamError, Params
 from clnn_ros.graph import qos
 from clnn_ros.graph.content import RULES
-from clnn_ros.graph.names import (ACTION, CLOCK, REWARD, SPIKES, STATE, TRIAL_EVENT,
-                                  TRIAL_MANAGER, WEIGHTS)
+from clnn_ros.graph.names import (ACTION, CLOCK, REWARD, SIM_TIME_NODES, SPIKES, STATE,
+                                  TRIAL_EVENT, TRIAL_MANAGER, WEIGHTS)
 from clnn_ros.rclpy_session import make_executor, qos_profile, ros_session
 from fuzz_messages import (FAR, STALE, STALE_FROM, TYPES, WELL_FORMED, MessageMaker, clock_tick,
                            schedule)
@@ -73,9 +73,9 @@ SUBSCRIBERS = {CLOCK: ["environment"], TRIAL_EVENT: ["environment", "encoder", "
                STATE: ["encoder", "reward", TRIAL_MANAGER], SPIKES: ["agent", TRIAL_MANAGER],
                REWARD: ["agent", TRIAL_MANAGER], ACTION: ["environment", TRIAL_MANAGER],
                WEIGHTS: [TRIAL_MANAGER]}
-# Who else hears a topic: the environment's sim-time clock (use_sim_time) subscribes to /clock;
-# the fuzzer itself listens to clock and trial/event.
-OTHER_SUBSCRIPTIONS = {CLOCK: 2, TRIAL_EVENT: 1}
+# Who else hears a topic: the sim-time clock (use_sim_time) of SIM_TIME_NODES subscribes to
+# /clock; the fuzzer itself listens to clock and trial/event.
+OTHER_SUBSCRIPTIONS = {CLOCK: len(SIM_TIME_NODES) + 1, TRIAL_EVENT: 1}
 # What every subscriber of a topic refuses for its content (docs/ROS_GRAPH.md, "What a node
 # refuses").
 REFUSED = RULES

@@ -20,6 +20,7 @@ from rcl_interfaces.srv import (DescribeParameters, GetParameters, ListParameter
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
 from clnn_ros.graph.run import NODE_PARAMETERS
+from clnn_ros.nodes.glue import RCLPY_PARAMETERS
 from clnn_ros.rclpy_session import resend_until_answered
 
 from test_graph import processes_with, read_steps, wait_for_line
@@ -125,8 +126,7 @@ def test_a_node_declares_only_the_parameters_it_uses(ros_env, node):
         context.try_shutdown()
         process.send_signal(signal.SIGINT)
         process.communicate(timeout=20)
-    builtin = {"use_sim_time", "start_type_description_service"}
-    assert set(listed) - builtin == set(NODE_PARAMETERS[node]) | ({"segments"} if node == "agent"
+    assert set(listed) - set(RCLPY_PARAMETERS) == set(NODE_PARAMETERS[node]) | ({"segments"} if node == "agent"
                                                                   else set())
     assert "physics" not in listed and ("sigma" in listed) == (node == "agent")
     assert sim_time  # sim time on request at the start, for a user who wants the graph's clock

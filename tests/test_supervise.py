@@ -29,3 +29,28 @@ def test_a_child_that_ignores_sigterm_is_killed_and_told_apart_from_a_terminated
         assert supervisor.children["sleeper"].returncode == -15
     finally:
         supervisor.close()
+
+
+def test_a_node_that_does_not_stop_in_time_shows_where_it_hangs():
+    """Before it terminates a node of its own, run_all has it print the stack of every thread
+    (process_signals.SHOW_STACKS), so the run's log says where it hung; another child (an
+    --env-node command) is not sent that signal, which could end it."""
+    hangs = ("import signal, sys, time; from clnn_ros.process_signals import catch_signals; "
+             "received = catch_signals(); print('ready', file=sys.stderr, flush=True)\n"
+             "def stuck_here():  # deaf to SIGINT, ends on SIGTERM\n"
+             "    while signal.SIGTERM not in received: time.sleep(0.01)\nstuck_here()")
+    supervisor = Supervisor()
+    try:
+        for name, shows_stacks in (("ours", True), ("theirs", False)):
+            child = supervisor.start(name, [sys.executable, "-c", hangs], dict(os.environ),
+                                     shows_stacks=shows_stacks)
+            deadline = time.monotonic() + 60  # a hang bound: it has set its handlers
+            while "ready" not in child.last_lines() and time.monotonic() < deadline:
+                time.sleep(0.05)
+        forced = supervisor.stop(["ours", "theirs"], 0.1, interrupt=True)
+        assert forced == [("ours", "terminated"), ("theirs", "terminated")]
+        assert any("in stuck_here" in line for line in supervisor.children["ours"].last_lines())
+        assert not any("stuck_here" in line
+                       for line in supervisor.children["theirs"].last_lines())
+    finally:
+        supervisor.close()

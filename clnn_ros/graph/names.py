@@ -39,6 +39,9 @@ SAVE_CHECKPOINT = "~/save_checkpoint"
 
 # The nodes the trial manager waits for before the first tick, and the recorder's name.
 GRAPH_NODES = ("environment", "encoder", "reward", "agent")
+# The graph nodes that run on the graph's sim time (use_sim_time, whose TimeSource subscribes
+# /clock): the environment, per its contract (docs/ENV_CONTRACT.md). The others read no ROS time.
+SIM_TIME_NODES = ("environment",)
 TRIAL_MANAGER = "trial_manager"
 RECORDER = "recorder"
 # The trial manager's exit status when the graph never started: another graph of the same names

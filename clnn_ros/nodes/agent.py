@@ -37,7 +37,7 @@ class AgentNode(Node):
     def __init__(self, run: dict, **node_options):
         super().__init__("agent", **node_options)
         self.params, self.settings = declare_run_parameters(self, run)
-        use_sim_time(self)
+        use_sim_time(self, "agent")
         self.tau_ns = tick_nanoseconds(self.params.tau)
         # the seed's weights, or those of init_weights (a checkpoint: its whole state)
         start = episode_start(self.settings["init_weights"], self.settings["seed"], self.params,

@@ -25,7 +25,7 @@ class EncoderNode(Node):
     def __init__(self, run: dict, **node_options):
         super().__init__("encoder", **node_options)
         self.params, settings = declare_run_parameters(self, run)
-        use_sim_time(self)
+        use_sim_time(self, "encoder")
         self.tau_ns = tick_nanoseconds(self.params.tau)
         self.encoder = Encoder.from_params(self.params)
         self.finished, self.failure = Future(), None

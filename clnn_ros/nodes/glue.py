@@ -23,7 +23,7 @@ from ..graph import qos
 from ..graph.content import RULES
 from ..graph.fields import EPISODE_END, tick_stamp
 from ..graph.lockstep import Refusals, episode_end_problem
-from ..graph.names import READY, TRIAL_EVENT
+from ..graph.names import READY, SIM_TIME_NODES, TRIAL_EVENT
 from ..graph.run import (DESCRIPTIONS, declared_values, node_parameters, read_params_file,
                          names_list)
 from ..rclpy_session import qos_profile, ros_session, spin_until_finished, split_ros_arguments
@@ -247,15 +247,16 @@ def close_node(node: Node, destroy: Callable[[Node], None] = Node.destroy_node) 
     destroy(node)
 
 
-def use_sim_time(node: Node, sim_time: bool = False) -> None:
-    """The node's ROS time for the whole run: the graph's sim time (/clock, from the trial
-    manager) if `sim_time` (the environment: the contract of docs/ENV_CONTRACT.md) or if it was
-    started with -p use_sim_time:=true, its own time otherwise. The encoder, reward and agent
+def use_sim_time(node: Node, role: str) -> None:
+    """The ROS time of the node of this role for the whole run: the graph's sim time (/clock,
+    from the trial manager) if the role is one of names.SIM_TIME_NODES (the environment: the
+    contract of docs/ENV_CONTRACT.md) or if it was started with -p use_sim_time:=true, its own
+    time otherwise. The encoder, reward and agent
     read no ROS time (every stamp comes from a message's tick), and the /clock delivery that
     rclpy's TimeSource takes for use_sim_time cost about a sixth of the CPU of a tick
     (docs/benchmark_graph.md). A later change of use_sim_time is refused, as every other
     parameter is (read-only)."""
-    if sim_time:
+    if role in SIM_TIME_NODES:
         node.set_parameters([Parameter("use_sim_time", Parameter.Type.BOOL, True)])
     runs_on = ("the graph's sim time" if node.get_parameter("use_sim_time").value
                else "its own time")

@@ -62,7 +62,7 @@ class RecorderNode(Node):
                        "environment": ("", "what ran as the environment node, kept in the bag "
                                        "(run_all sets it): cartpole, gymnasium, mujoco, external "
                                        "or the --env-node command")})
-        use_sim_time(self)  # log and receive times are wall-clock, as rosbag2's
+        use_sim_time(self, RECORDER)  # log and receive times are wall-clock, as rosbag2's
         bag_path = settings.pop("bag_path")
         environment = settings.pop("environment")
         if not bag_path:

@@ -27,7 +27,7 @@ class RewardNode(Node):
     def __init__(self, run: dict, **node_options):
         super().__init__("reward", **node_options)
         self.params, settings = declare_run_parameters(self, run)
-        use_sim_time(self)
+        use_sim_time(self, "reward")
         self.tau_ns = tick_nanoseconds(self.params.tau)
         # a resumed episode (init_weights: a checkpoint) continues a carried success count
         self.counter = episode_start(settings["init_weights"], settings["seed"], self.params,

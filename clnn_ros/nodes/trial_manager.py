@@ -70,7 +70,7 @@ class TrialManagerNode(Node):
     def __init__(self, run: dict, **node_options):
         super().__init__(TRIAL_MANAGER, **node_options)  # its time is its own: it has the clock
         self.params, self.settings = declare_run_parameters(self, run)
-        use_sim_time(self)
+        use_sim_time(self, TRIAL_MANAGER)
         self.tau_ns = tick_nanoseconds(self.params.tau)
         self.extra_nodes = names_list(self.settings["extra_nodes"])
         self.finished, self.failure = Future(), None
