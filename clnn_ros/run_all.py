@@ -272,9 +272,9 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
             episode_ended = status in (0, 1) and not failed
             recorder_forced = stop_recorder(supervisor, episode_ended)
             # Told to stop while still starting (before its handler was set), it dies of the
-            # SIGINT: as told, nothing recorded.
+            # SIGTERM: as told, nothing recorded.
             stopped_as_told = (0, 128 + signal.SIGINT) + \
-                (() if episode_ended else (-signal.SIGINT,))
+                (() if episode_ended else (-signal.SIGTERM,))
             if not failed and not interrupted and not recorder_forced and \
                     recorder.returncode not in stopped_as_told:
                 report_failure(recorder, bag_path)

@@ -188,14 +188,16 @@ class Supervisor:
                 say(f"run_all: warning: {problem}")
 
     def stop(self, names: list[str], grace_s: float, interrupt: bool) -> list[tuple[str, str]]:
-        """Stop these children: SIGINT first if `interrupt`, else they get `grace_s` to exit
-        by themselves; then SIGTERM, then SIGKILL. Returns (name, "terminated" or "killed") for
-        each child it had to stop: killed if it did not end on SIGTERM either (a process hung
-        in native code with Python's lock held cannot run its signal handler)."""
+        """Stop these children: told with SIGTERM first if `interrupt` (a node takes it as it
+        takes SIGINT, docs/ENV_CONTRACT.md, and one still importing its modules ends silently,
+        where SIGINT would print a KeyboardInterrupt traceback), else they get `grace_s` to exit
+        by themselves; then SIGTERM again, then SIGKILL. Returns (name, "terminated" or
+        "killed") for each child it had to stop: killed if it did not end on SIGTERM either (a
+        process hung in native code with Python's lock held cannot run its signal handler)."""
         chosen = [self.children[n] for n in names if n in self.children]
         if interrupt:
             for child in chosen:
-                child.signal(signal.SIGINT)
+                child.signal(signal.SIGTERM)
         deadline = time.monotonic() + grace_s
         forced = []
         for child in chosen:
@@ -283,7 +285,7 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
         report_failure(failure, bag_path)
     nodes = [n for n in NODES if n in supervisor.children]
     # After a normal end every node has its EPISODE_END; after a failure a node that was still
-    # starting may have missed it: they are told with SIGINT. One still importing on a loaded
+    # starting may have missed it: they are told with SIGTERM. One still importing on a loaded
     # machine may take longer than the grace to get there: after a failure, its termination is
     # part of ending the run, not a node that missed its end.
     forced = supervisor.stop(nodes, SHUTDOWN_GRACE_S,

@@ -37,8 +37,8 @@ def test_a_node_that_does_not_stop_in_time_shows_where_it_hangs():
     --env-node command) is not sent that signal, which could end it."""
     hangs = ("import signal, sys, time; from clnn_ros.process_signals import catch_signals; "
              "received = catch_signals(); print('ready', file=sys.stderr, flush=True)\n"
-             "def stuck_here():  # deaf to SIGINT, ends on SIGTERM\n"
-             "    while signal.SIGTERM not in received: time.sleep(0.01)\nstuck_here()")
+             "def stuck_here():  # deaf to the first request, ends on the second\n"
+             "    while len(received) < 2: time.sleep(0.01)\nstuck_here()")
     supervisor = Supervisor()
     try:
         for name, shows_stacks in (("ours", True), ("theirs", False)):
@@ -52,5 +52,23 @@ def test_a_node_that_does_not_stop_in_time_shows_where_it_hangs():
         assert any("in stuck_here" in line for line in supervisor.children["ours"].last_lines())
         assert not any("stuck_here" in line
                        for line in supervisor.children["theirs"].last_lines())
+    finally:
+        supervisor.close()
+
+
+def test_a_child_told_to_stop_while_still_importing_ends_without_a_traceback():
+    """A node that has not yet set its signal handlers (still importing its modules on a
+    loaded machine) when run_all stops the run after a failure: it is told with SIGTERM, which
+    ends it silently, not with SIGINT, which would print a KeyboardInterrupt traceback."""
+    importing = "import sys, time; print('ready', file=sys.stderr, flush=True); time.sleep(60)"
+    supervisor = Supervisor()
+    try:
+        child = supervisor.start("starting", [sys.executable, "-c", importing], dict(os.environ))
+        deadline = time.monotonic() + 60  # a hang bound
+        while "ready" not in child.last_lines() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert supervisor.stop(["starting"], 10.0, interrupt=True) == []  # ended when told
+        child.close()
+        assert child.returncode == -15 and child.last_lines() == ["ready"]
     finally:
         supervisor.close()
