@@ -231,7 +231,7 @@ def test_bad_angle_edges(value, message):
 ])
 def test_run_all_environment_options_are_checked(ros_env, args, message):
     result = subprocess.run([PY, "-m", "clnn_ros.run_all", *args], env=ros_env,
-                            capture_output=True, text=True, timeout=60)
+                            capture_output=True, text=True, timeout=HANG_S)
     assert result.returncode == 2 and message in result.stderr, result.stderr
 
 

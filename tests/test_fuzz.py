@@ -92,7 +92,7 @@ def test_every_fuzz_message_is_refused_and_the_episode_equals_the_core(tmp_path,
             fuzzers_files |= own_fast_dds_files(fuzzer.pid)
             time.sleep(0.5)
         assert graph.poll() is not None, f"run_all still runs after {EPISODE_HANG_S} s"
-        _, fuzz_errors = fuzzer.communicate(timeout=60)
+        _, fuzz_errors = fuzzer.communicate(timeout=HANG_S)
     finally:
         graph.kill()
         fuzzer.kill()

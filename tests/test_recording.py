@@ -51,7 +51,7 @@ def recorded(ros_env, tmp_path_factory):
     assert f"run_all: bag {out / 'bag'}" in run.stdout
     analysis = subprocess.run([sys.executable, "-m", "clnn_ros.analyze", str(out / "bag"),
                                "--out", str(out / "analysis")], capture_output=True, text=True,
-                              timeout=60)
+                              timeout=HANG_S)
     assert analysis.returncode == 0, analysis.stderr
     return out
 
@@ -460,7 +460,7 @@ def test_killed_recorders_bag_is_repaired(ros_env, tmp_path, moment):
         assert held - last <= 2 * max(chunks) + 50, (held, last, chunks)  # + progress' lag
         result = subprocess.run([sys.executable, "-m", "clnn_ros.analyze", str(broken), "--out",
                                  str(tmp_path / "a"), "--salvage"], capture_output=True,
-                                text=True, timeout=60)
+                                text=True, timeout=HANG_S)
         assert result.returncode == 0, result.stderr
         assert "salvaged" in (tmp_path / "a" / "summary.md").read_text()
     assert not processes_with(str(tmp_path))
@@ -478,7 +478,7 @@ def test_repair_refuses_bad_input_with_one_line(tmp_path):
              (header_only, "no complete chunk"))
     for path, message in cases:
         result = subprocess.run([sys.executable, "-m", "clnn_ros.bag", "repair", str(path)],
-                                capture_output=True, text=True, timeout=60)
+                                capture_output=True, text=True, timeout=HANG_S)
         assert result.returncode == 1, (path, result.stderr)
         assert message in result.stderr and "Traceback" not in result.stderr, result.stderr
         assert len(result.stderr.strip().splitlines()) == 1, result.stderr
@@ -486,7 +486,7 @@ def test_repair_refuses_bad_input_with_one_line(tmp_path):
                                                          "text.mcap"]  # no half-written copy
     result = subprocess.run([sys.executable, "-m", "clnn_ros.bag", "repair",
                              str(REPO / "bags" / SAMPLE), "--out", str(tmp_path / "empty_dir")],
-                            capture_output=True, text=True, timeout=60)
+                            capture_output=True, text=True, timeout=HANG_S)
     assert result.returncode == 1 and "exists" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
 
@@ -502,7 +502,7 @@ def test_repair_on_a_full_disk_says_where_it_could_not_write(tmp_path):
     result = subprocess.run(
         ["unshare", "--mount", "sh", "-c", script, "_", sys.executable, "-m", "clnn_ros.bag",
          "repair", str(REPO / "bags" / SAMPLE), "--out", str(out)],
-        env={**os.environ, "FULL": str(full)}, capture_output=True, text=True, timeout=60)
+        env={**os.environ, "FULL": str(full)}, capture_output=True, text=True, timeout=HANG_S)
     if result.returncode == 99:
         pytest.skip("no mount namespace here")
     assert result.returncode == 1 and "Traceback" not in result.stderr, result.stderr
@@ -515,7 +515,7 @@ def test_repair_on_a_full_disk_says_where_it_could_not_write(tmp_path):
 
 def analyze(*args):
     return subprocess.run([sys.executable, "-m", "clnn_ros.analyze", *map(str, args)],
-                          capture_output=True, text=True, timeout=60)
+                          capture_output=True, text=True, timeout=HANG_S)
 
 
 @pytest.mark.ros

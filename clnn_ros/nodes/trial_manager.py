@@ -14,7 +14,7 @@ What ends an episode early, with exit status 1 and the node to blame:
 * a node of `external_nodes` that leaves the ROS graph (the nodes run_all or launch started
   are theirs to watch: they see the process exit; a paused one that drops out is alive);
 * another graph of the same node names in the same namespace and domain, seen before the first
-  tick or within DISCOVERY_S of the trial manager's start (exit status NOT_STARTED: the run is
+  tick or within DISCOVERY_S of it (exit status NOT_STARTED: the run is
   abandoned; later, a warning names it); a node of `external_nodes` that does not appear within
   `stall_timeout_s` once the rest is up (the others are waited for as long as they take);
 * a foreign publisher on a graph topic (graph.watch), unless allow_foreign_publishers: then
@@ -57,9 +57,12 @@ from .glue import (LOCKSTEP_QOS, PROGRESS_QOS, READY_QOS, Readiness, checked,
 
 WATCHDOG_S = 0.1
 GRAPH_CHECK_S = 0.5  # how often the ROS graph is looked at for nodes that left it
-# For this long after it starts, the trial manager looks for another graph of the same names in
-# its namespace (a new participant sees a running one after 0.1-2.8 s here); the episode runs
-# meanwhile, and is abandoned if one turns up.
+# For this long after the first tick, the trial manager looks for another graph of the same names
+# in its namespace (a new participant sees a running one after 0.1-2.8 s here); the episode runs
+# meanwhile, and is abandoned if one turns up. Counted from the first tick, not from the trial
+# manager's own start: on a loaded machine its nodes may take longer than this to come up, and
+# the graph then started past the window, beside the other, refusing its messages (fresh-clone
+# run fb7).
 DISCOVERY_S = 3.0
 WAITING_NOTE_S = 10.0  # while the graph is not ready, a note of what it waits for this often
 # Who publishes what within a tick, in causal order: the first one missing went silent.
@@ -85,7 +88,6 @@ class TrialManagerNode(Node):
         # a resumed episode (init_weights: a checkpoint) starts at the checkpoint's next trial
         self.trial = episode_start(self.settings["init_weights"], self.settings["seed"],
                                    self.params, NODE_PARAMETERS[TRIAL_MANAGER]).first_trial
-        self.created_at = time.monotonic()
         self.started_at = None
         self.ready = set()
         self.external_nodes = names_list(self.settings["external_nodes"])
@@ -204,7 +206,7 @@ class TrialManagerNode(Node):
         present = Counter(name for name, ns in self.get_node_names_and_namespaces()
                           if ns == namespace)
         if twice := named_twice(present, self.expected | {TRIAL_MANAGER}):
-            if time.monotonic() - self.created_at < DISCOVERY_S or self.started_at is None:
+            if self.started_at is None or time.monotonic() - self.started_at < DISCOVERY_S:
                 self.not_started = True
                 return (f"another graph runs in namespace {namespace} on ROS domain "
                         f"{os.environ.get('ROS_DOMAIN_ID', '0') or '0'}: two nodes named "
