@@ -25,7 +25,7 @@ from clnn_ros.rosenv import own_fast_dds_files, unused_fast_dds_files
 
 from test_graph import EPISODE_HANG_S
 
-from conftest import files_no_other_test_makes, free_domain_id, problem_lines
+from conftest import HANG_S, files_no_other_test_makes, free_domain_id, problem_lines
 
 pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 DOMAIN_ID = free_domain_id()

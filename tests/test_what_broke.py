@@ -25,6 +25,7 @@ from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
 from clnn_ros.graph.names import PER_TICK, STATE
 from clnn_ros.graph.ticks import TICKS_RECORD, TickRanges
+from clnn_ros.nodes.trial_manager import DISCOVERY_S
 
 from test_graph import processes_with, wait_for_line
 from test_recording import child
@@ -176,7 +177,10 @@ def test_a_second_node_of_a_graph_name_mid_run_is_named(ros_env, tmp_path):
          "--max-steps", str(MAX_STEPS), "--out", str(tmp_path), "--no-record"],
         env={**ros_env, "CLNN_TEST_RUN": str(tmp_path)}, stdout=subprocess.PIPE,
         stderr=subprocess.PIPE, text=True, start_new_session=True)
-    wait_for_line(process.stdout, "trial    2/")
+    wait_for_line(process.stdout, "trial    1/")
+    # Past the window in which a second graph is looked for (it counts from the first tick,
+    # before trial 1 ended): an intruder then is named, not taken for a graph to abandon.
+    time.sleep(DISCOVERY_S)
     intruder = subprocess.Popen([sys.executable, "-m", "clnn_ros.nodes.agent", "--ros-args",
                                  "-p", f"seed:={SEED}"], env=ros_env, stderr=subprocess.DEVNULL)
     try:

@@ -59,10 +59,8 @@ WATCHDOG_S = 0.1
 GRAPH_CHECK_S = 0.5  # how often the ROS graph is looked at for nodes that left it
 # For this long after the first tick, the trial manager looks for another graph of the same names
 # in its namespace (a new participant sees a running one after 0.1-2.8 s here); the episode runs
-# meanwhile, and is abandoned if one turns up. Counted from the first tick, not from the trial
-# manager's own start: on a loaded machine its nodes may take longer than this to come up, and
-# the graph then started past the window, beside the other, refusing its messages (fresh-clone
-# run fb7).
+# meanwhile, and is abandoned if one turns up. Counted from the first tick, not from its own
+# start: on a loaded machine the nodes may take longer than this to come up (run fb7).
 DISCOVERY_S = 3.0
 WAITING_NOTE_S = 10.0  # while the graph is not ready, a note of what it waits for this often
 # Who publishes what within a tick, in causal order: the first one missing went silent.
