@@ -111,18 +111,21 @@ def test_ctrl_c_stops_everything(ros_env, tmp_path, in_private_shm):
 
 
 def wait_for_line(stream, text: str, timeout: float = 180.0) -> str:
-    """The first line with `text`; the timeout bounds a hang, it times nothing."""
-    found = []
+    """The first line with `text`; the timeout bounds a hang, it times nothing. Without one,
+    the stream's last lines read say what came instead."""
+    found, seen = [], []
 
     def read():
         for line in stream:
             if text in line:
                 found.append(line)
                 return
+            seen.append(line)
     reader = threading.Thread(target=read, daemon=True)
     reader.start()
     reader.join(timeout)
-    assert found, f"no line with {text!r} within {timeout} s"
+    ended = "the stream ended" if not reader.is_alive() else f"none within {timeout} s"
+    assert found, f"no line with {text!r}: {ended}; its last lines:\n{''.join(seen[-20:])}"
     return found[0]
 
 

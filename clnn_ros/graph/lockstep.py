@@ -70,6 +70,25 @@ class TickJoin:
         return True
 
 
+class RunningTime:
+    """The time a watchdog counts toward a stall at each of its checks: the wall time since the
+    last check, at most `cap` unless the process was busy meanwhile. A pause of the process
+    (SIGSTOP, a starved CPU) is not the graph's stall; a process kept busy is running, even when
+    the work (a flood of messages to refuse) keeps its watchdog's timer from running on time:
+    then the CPU time it used counts."""
+
+    def __init__(self, cap: float, clock: Callable[[], float] = time.monotonic,
+                 cpu_time: Callable[[], float] = time.process_time):
+        self.cap, self.clock, self.cpu_time = cap, clock, cpu_time
+        self.wall, self.cpu = clock(), cpu_time()
+
+    def since_last_check(self) -> float:
+        wall, cpu = self.clock(), self.cpu_time()
+        running = min(wall - self.wall, max(self.cap, cpu - self.cpu))
+        self.wall, self.cpu = wall, cpu
+        return running
+
+
 def episode_end_problem(event_tick: int, current_tick: int) -> str | None:
     """EPISODE_END(e) is sent with e the tick the trial manager waits for (it holds all of tick
     e-1) or the tick it just completed (the episode's last), and no clock follows it: a node

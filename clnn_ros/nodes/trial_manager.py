@@ -9,8 +9,9 @@ publishes clock(t+1), preceded by END/START (or EPISODE_END) events when the tri
 
 What ends an episode early, with exit status 1 and the node to blame:
 * a stall: no tick completes for `stall_timeout_s` of the trial manager's own running time (a
-  trial manager that was itself paused or starved does not count the pause); the node named is
-  the first of the tick's chain whose message for the tick is missing;
+  trial manager that was itself paused or starved does not count the pause, one kept busy, e.g.
+  refusing a flood, counts its CPU time); the node named is the first of the tick's chain whose
+  message for the tick is missing;
 * a node of `external_nodes` that leaves the ROS graph (the nodes run_all or launch started
   are theirs to watch: they see the process exit; a paused one that drops out is alive);
 * another graph of the same node names in the same namespace and domain, seen before the first
@@ -43,7 +44,7 @@ from std_msgs.msg import String, UInt64
 from ..core.episode import seed_setup
 from ..files import describe_write_error, write_atomically, write_text_atomically
 from ..graph.fields import REACHED_MAX_STEPS, tick_nanoseconds, tick_stamp, trials_csv
-from ..graph.lockstep import Refusals, TickJoin
+from ..graph.lockstep import Refusals, RunningTime, TickJoin
 from ..graph.names import (ACTION, CLOCK, GRAPH_NODES, NOT_STARTED, PUBLISHED_BY, READY,
                            RECORDED, RECORDER, REWARD, SPIKES, STATE, TRIAL_EVENT, TRIAL_MANAGER,
                            WEIGHTS)
@@ -92,7 +93,8 @@ class TrialManagerNode(Node):
         self.expected = set(GRAPH_NODES) | self.extra_nodes
         self.in_graph = set()  # nodes of the graph seen in the ROS graph
         self.externals_awaited_since = None
-        self.last_note = self.last_graph_check = self.last_check = time.monotonic()
+        self.last_note = self.last_graph_check = time.monotonic()
+        self.running = RunningTime(cap=2 * WATCHDOG_S)
         self.stalled_s = 0.0  # running time of this node without progress
         self.not_started = False  # another graph of the same names runs
         self.tainted = None  # a foreign publisher seen on a graph topic
@@ -180,10 +182,7 @@ class TrialManagerNode(Node):
     def check(self) -> None:
         """Start once the graph is ready; afterwards watch for a stall and for nodes leaving."""
         now = time.monotonic()
-        # Only the time this timer ran on schedule counts: a pause of this process (SIGSTOP, a
-        # starved CPU) is not the graph's stall.
-        running = min(now - self.last_check, 2 * WATCHDOG_S)
-        self.last_check = now
+        running = self.running.since_last_check()  # a pause of this process is no stall
         if now - self.last_graph_check >= GRAPH_CHECK_S:
             self.last_graph_check = now
             if problem := self.graph_problem():
