@@ -1,6 +1,6 @@
 """What the analysis reads of a bag (clnn_ros.analyze): the run's parameters from its metadata
-record, its trial events and weight snapshots, each per-tick topic's ticks (from the header
-stamps, sim time) and the raw states, spikes, rewards and actions, and one trial's series."""
+record, its trial events and weight snapshots, each per-tick topic's ticks (each
+message's tick) and the raw states, spikes, rewards and actions, and one trial's series."""
 
 from __future__ import annotations
 
@@ -9,14 +9,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .bag import Decoder, iter_raw, mcap_file, open_bag
+from .bag import Decoder, begins_with_a_stamp, iter_raw, mcap_file, open_bag, tick_of
 from .core.params import ParamError, Params, params_from_strings
-from .graph.fields import END, REACHED_MAX_STEPS, START, tick_nanoseconds
+from .graph.fields import END, FAILURE_REASONS, REACHED_MAX_STEPS, START, tick_nanoseconds
 from .graph.names import (ACTION, INPUT_LABELS, PER_TICK, REWARD, SPIKES, STATE, TOPIC_TYPES,
                           TRIAL_EVENT, WEIGHTS)
 from .graph.run import RUN_SETTINGS
 
-REINFORCEMENT = {"reward": 1, "punish": -1}  # Reward.kind; "none" is 0
+REINFORCEMENT = {(1, 0): 1, (0, 1): -1}  # by Reward.reward_one_hot; none (0, 0) is 0
 
 
 def metadata_record(reader) -> dict:
@@ -58,8 +58,8 @@ def run_parameters(record: dict) -> tuple[Params, dict]:
 
 def read_bag(path: Path, salvage: bool):
     """One pass over the bag: events and weights decoded, ticks of every per-tick topic counted
-    from the header stamps (sim time), the raw states, spikes, rewards and actions kept per
-    tick."""
+    (each message's tick; /clock's from its sim time), the raw states, spikes, rewards and
+    actions kept per tick."""
     reader, stream = open_bag(path, salvage)
     with stream:
         record = metadata_record(mcap_file(path) if salvage else reader)
@@ -72,7 +72,8 @@ def read_bag(path: Path, salvage: bool):
         schemas = {}
         counts = {topic: 0 for topic in TOPIC_TYPES}
         recorded_as = {}  # relative name: the name in the bag (its namespace)
-        for schema, topic, sim_ns, _log_ns, data, name in iter_raw(reader):
+        stamped = {}  # schema id: whether its messages begin with a stamp (bag.tick_of)
+        for schema, topic, _log_ns, data, name in iter_raw(reader):
             recorded_as[topic] = name
             counts[topic] = counts.get(topic, 0) + 1
             if topic == TRIAL_EVENT:
@@ -82,7 +83,9 @@ def read_bag(path: Path, salvage: bool):
             elif topic == INPUT_LABELS:
                 labels = list(decode(schema, data).labels)
             elif topic in ticks:
-                tick = sim_ns // tau_ns
+                if schema.id not in stamped:
+                    stamped[schema.id] = begins_with_a_stamp(schema)
+                tick = tick_of(data, tau_ns, stamped[schema.id])
                 ticks[topic].append(tick)
                 if topic in raw:  # the first of a tick: a second one is a stale or forged copy
                     raw[topic].setdefault(tick, data)
@@ -90,6 +93,15 @@ def read_bag(path: Path, salvage: bool):
     return dict(params=params, given=given, record=record, events=events, weights=weights,
                 ticks=ticks, raw=raw, schemas=schemas, counts=counts, decode=decode,
                 recorded_as=recorded_as, labels=labels)
+
+
+def end_reason(state) -> str:
+    """How the trial of its last state ended: the limit it crossed, else REACHED_MAX_STEPS. (A bag
+    of before 2026-12-04 names the limit in failure_reason; one of now numbers it in failure.)"""
+    failure = getattr(state, "failure", None)
+    if failure is None:
+        return state.failure_reason or REACHED_MAX_STEPS
+    return FAILURE_REASONS[failure] if 0 < failure < len(FAILURE_REASONS) else REACHED_MAX_STEPS
 
 
 def trial_rows(events) -> list[list]:
@@ -155,6 +167,6 @@ def trial_series(data, trial: int):
                           s.pole_angular_velocity_deg_per_s) for s in states]),
         spikes=spikes, input_labels=labels,
         actions=np.array([a.force_direction if a else 0 for a in messages(ACTION)]),
-        reinforcement=np.array([REINFORCEMENT.get(r.kind, 0) if r else 0
+        reinforcement=np.array([REINFORCEMENT.get(tuple(r.reward_one_hot), 0) if r else 0
                                 for r in messages(REWARD)]),
-        steps=last.successful_steps, end_reason=last.failure_reason or REACHED_MAX_STEPS)
+        steps=last.successful_steps, end_reason=end_reason(last))

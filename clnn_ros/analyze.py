@@ -19,10 +19,10 @@ Writes into DIR (default: <bag>_analysis, beside the bag directory or the .mcap 
                          action (at most 300 frames)
     summary.md           what the bag holds and what the run did (environment, physics,
                          encoding), and what each picture shows
-The chosen trial (--trial, default the longest) is read from the messages' header stamps (sim
-time), decoded with the schemas embedded in the bag; segments are numbered from 0 and inputs
-labelled as the messages do. Exit status: 0 done, 1 the bag cannot be read (missing, not MCAP,
-truncated: --salvage reads the complete chunks of a file whose recorder was killed, `python -m
+The chosen trial (--trial, default the longest) is read from the messages' ticks, decoded
+with the schemas embedded in the bag; segments are numbered from 0 and inputs labelled as the
+messages do. Exit status: 0 done, 1 the bag cannot be read (missing, not MCAP, truncated:
+--salvage reads the complete chunks of a file whose recorder was killed, `python -m
 clnn_ros.bag repair` makes a finished copy) or the results cannot be written, 2 a refused
 argument (a trial not in the bag, an --out that cannot be a directory). The results are written
 together: a refused or failed analysis leaves no file behind. What is read of the bag:

@@ -4,7 +4,7 @@ only). Run it against a graph started in another terminal (same ROS_DOMAIN_ID).
     python -m clnn_ros.echo /cartpole/state
     python -m clnn_ros.echo /rln/action --once
     python -m clnn_ros.echo /cartpole/state --field pole_angle_deg
-    python -m clnn_ros.echo /rln/spikes --flow-style    # {header: {...}, tick: 12, spikes: [0, 1]}
+    python -m clnn_ros.echo /rln/spikes --flow-style    # {tick: 12, trial: 0, spikes: [0, 1]}
     python -m clnn_ros.echo /cartpole/state --csv       # one line per message, for plotting
     python -m clnn_ros.echo /rln/spikes --raster        # one row per tick: tick 12 trial 0 |..#.|
 
@@ -135,7 +135,7 @@ def main(argv=None) -> int:
                                    description=__doc__.split("\n\n")[0])
     parser.add_argument("topic")
     parser.add_argument("--once", action="store_true", help="print one message and exit")
-    parser.add_argument("--field", help="print only this field, e.g. header.stamp or pole_angle_deg")
+    parser.add_argument("--field", help="print only this field, e.g. tick or pole_angle_deg")
     style = parser.add_mutually_exclusive_group()
     style.add_argument("--flow-style", action="store_true",
                        help="YAML with collections inline: {sec: 0, nanosec: 20000000}")

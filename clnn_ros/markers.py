@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 
-from builtin_interfaces.msg import Time
 from visualization_msgs.msg import Marker, MarkerArray
 
 FRAME = "world"
@@ -48,11 +47,12 @@ class CartPoleMarkers:
                        (POLE_DIAMETER_M, POLE_DIAMETER_M, 2 * pole_half_length_m))
         self.array = MarkerArray(markers=[track, cart, pole])
 
-    def update(self, stamp: Time, cart_position_m: float, pole_angle_deg: float) -> MarkerArray:
-        """The markers of one state, stamped with its header's stamp."""
+    def update(self, stamp: tuple[int, int], cart_position_m: float,
+               pole_angle_deg: float) -> MarkerArray:
+        """The markers of one state, stamped (sec, nanosec) with the sim time of its tick."""
         track, cart, pole = self.array.markers
         for marker in (track, cart, pole):
-            marker.header.stamp.sec, marker.header.stamp.nanosec = stamp.sec, stamp.nanosec
+            marker.header.stamp.sec, marker.header.stamp.nanosec = stamp
         cart.pose.position.x = cart_position_m
         # A cylinder's axis is its local z: turn it by the pole angle about y, centre it half
         # a pole length from the hinge along the tilted axis.

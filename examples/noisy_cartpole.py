@@ -84,22 +84,20 @@ class NoisyCartPole(Node):
             self.advance(start, action)
 
     def advance(self, start, action):
-        reason = ""
+        failure = CartPoleState.FAILURE_NONE
         if start:
             self.trial, self.steps = start.trial, 0
             self.s = [0.0, 0.0, math.radians(start.initial_angle_deg), 0.0]
         else:
             noise = 1 + self.p["force_noise"] * self.rng.gauss(0, 1)
-            reason = self.physics(action.force_direction * self.p["force"] * noise)
-            self.steps += not reason
-        self.over = bool(reason) or self.steps >= self.p["max_steps"]
+            failure = self.physics(action.force_direction * self.p["force"] * noise)
+            self.steps += failure == CartPoleState.FAILURE_NONE
+        self.over = failure != CartPoleState.FAILURE_NONE or self.steps >= self.p["max_steps"]
         x, xd, th, thd = self.s
         m = CartPoleState(cart_position_m=x, cart_velocity_m_per_s=xd,
                           pole_angle_deg=math.degrees(th),
-                          pole_angular_velocity_deg_per_s=math.degrees(thd), failed=bool(reason),
-                          failure_reason=reason, successful_steps=self.steps, tick=self.tick,
-                          trial=self.trial)
-        m.header.stamp.sec, m.header.stamp.nanosec = divmod(self.tick * self.tau_ns, 10**9)
+                          pole_angular_velocity_deg_per_s=math.degrees(thd), failure=failure,
+                          successful_steps=self.steps, tick=self.tick, trial=self.trial)
         self.pub.publish(m)
         self.tick += 1
 
@@ -114,8 +112,10 @@ class NoisyCartPole(Node):
         thd += p["tau"] * tha
         self.s = [x + p["tau"] * xd, xd, th + p["tau"] * thd, thd]
         if abs(math.degrees(self.s[2])) > p["angle_limit_deg"]:
-            return "pole_angle"
-        return "cart_position" if abs(self.s[0]) > p["track_limit_m"] else ""
+            return CartPoleState.FAILURE_POLE_ANGLE
+        if abs(self.s[0]) > p["track_limit_m"]:
+            return CartPoleState.FAILURE_CART_POSITION
+        return CartPoleState.FAILURE_NONE
 
 
 def stop_at_end_of_stdin(node):  # run_all never writes to our stdin: end of file = it is gone

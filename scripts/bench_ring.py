@@ -29,7 +29,7 @@ def ring_messages(kind: str) -> dict:
                                pole_angle_deg=-0.5, pole_angular_velocity_deg_per_s=3.0,
                                successful_steps=100),
         "spikes": SpikeVector(spikes=[0, 0, 1, 0, 0, 0]),
-        "reward": Reward(reward_one_hot=[0, 0], kind="none", success_counter=100),
+        "reward": Reward(reward_one_hot=[0, 0], success_counter=100),
         "action": Action(force_direction=1, force_n=10.0, winning_neuron=1, winning_segment=3),
     }
 

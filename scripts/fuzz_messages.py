@@ -4,10 +4,10 @@ every subscriber of its topic refuses it (graph.lockstep.Refusals counts the ref
 and kind):
 
   malformed, refused for its content (kind "content", graph.content), whatever its tick (t):
-    non-finite or out-of-range or inconsistent states, wrong-sized or not 1-hot spike vectors,
-    unknown or inconsistent rewards, out-of-range or inconsistent actions or winners that do
-    not exist, wrong-sized or out-of-range weights, unknown event kinds or STARTs outside the
-    angle limit, clocks between two ticks or with nanosec >= 1e9;
+    non-finite or out-of-range states or unknown failure codes, wrong-sized or not 1-hot spike
+    vectors, reward codes that are not 1-hot, out-of-range or inconsistent actions or winners
+    that do not exist, wrong-sized or out-of-range weights, unknown event kinds or STARTs
+    outside the angle limit, clocks between two ticks or with nanosec >= 1e9;
   well-formed, refused for its tick (kind "tick"):
     stale_tick     a tick 0..t-STALE (sent only from t >= STALE_FROM), behind every
                    subscriber: the trial manager published clock(t) only once every node had
@@ -16,7 +16,7 @@ and kind):
                    before it publishes state(L+2) (one writer's actions come in order), the
                    trial manager's spikes and rewards trail its actions, and its weights of L
                    follow action(L);
-    far_tick       a tick t+FAR..the last one a header stamp can carry (sec is int32), that an
+    far_tick       a tick t+FAR..the last one /clock can carry (its sec is int32), that an
                    episode never reaches (512 trials of 10,000 steps are 5.1 M ticks);
     foreign_graph  the messages another graph on the same domain and namespace would send: an
                    episode at a phase of FAR..2*FAR ticks ahead of this one (one phase per run),
@@ -37,9 +37,10 @@ from clnn_ros_msgs.msg import (Action, CartPoleState, Reward, SpikeVector, Trial
 from rosgraph_msgs.msg import Clock
 
 from clnn_ros.core.params import Params
-from clnn_ros.core.rln import ONE_HOT, REWARD_KINDS
-from clnn_ros.graph.content import FAILURE_REASONS, N_NEURONS
-from clnn_ros.graph.fields import NANOSECONDS, stamp_nanoseconds, tick_nanoseconds, tick_stamp
+from clnn_ros.core.rln import ONE_HOT
+from clnn_ros.graph.content import N_NEURONS
+from clnn_ros.graph.fields import (FAILURE_CART_POSITION, FAILURE_POLE_ANGLE, FAILURE_REASONS,
+                                   NANOSECONDS, stamp_nanoseconds, tick_nanoseconds)
 from clnn_ros.graph.names import ACTION, CLOCK, REWARD, SPIKES, STATE, TRIAL_EVENT, WEIGHTS
 
 TYPES = {CLOCK: Clock, TRIAL_EVENT: TrialEvent, STATE: CartPoleState, SPIKES: SpikeVector,
@@ -47,9 +48,9 @@ TYPES = {CLOCK: Clock, TRIAL_EVENT: TrialEvent, STATE: CartPoleState, SPIKES: Sp
 WELL_FORMED = ("stale_tick", "far_tick", "foreign_graph")
 MALFORMED = {CLOCK: ("between_ticks", "nanosec_overflow"),
              TRIAL_EVENT: ("unknown_kind", "non_finite_angle", "angle_out_of_range"),
-             STATE: ("non_finite", "out_of_range", "inconsistent"),
+             STATE: ("non_finite", "out_of_range", "unknown_failure"),
              SPIKES: ("wrong_size", "not_one_hot"),
-             REWARD: ("unknown_kind", "inconsistent_code"),
+             REWARD: ("both_lines", "not_binary"),
              ACTION: ("out_of_range", "non_finite_force", "inconsistent_force", "no_such_neuron"),
              WEIGHTS: ("wrong_size", "non_finite", "out_of_range")}
 STALE = 5  # a stale tick is at least this far behind the live tick
@@ -65,7 +66,7 @@ class MessageMaker:
     def __init__(self, p: Params, rng: random.Random):
         self.p, self.rng = p, rng
         self.tau_ns = tick_nanoseconds(p.tau)
-        self.max_tick = INT32_MAX * NANOSECONDS // self.tau_ns  # the last tick a stamp can carry
+        self.max_tick = INT32_MAX * NANOSECONDS // self.tau_ns  # the last tick /clock can carry
         self.n_angle_inputs = len(p.angle_edges_deg) + 1
         self.foreign_phase = rng.randint(FAR, 2 * FAR)  # the other graph's lead, in ticks
         self.foreign_trial0 = rng.randint(0, 10_000)
@@ -74,7 +75,6 @@ class MessageMaker:
         tick = self.tick(category, live)
         msg = getattr(self, "_" + TYPES[topic].__name__)(tick, category)
         if topic != CLOCK:
-            msg.header.stamp.sec, msg.header.stamp.nanosec = tick_stamp(tick, self.tau_ns)
             msg.tick = tick
             msg.trial = self.foreign_trial0 + tick // (self.p.max_steps + 1) \
                 if category == "foreign_graph" else self.rng.randint(0, 50)
@@ -123,8 +123,8 @@ class MessageMaker:
                             pole_angular_velocity_deg_per_s=rng.uniform(-100, 100),
                             successful_steps=rng.randint(0, p.max_steps))
         if category in WELL_FORMED and rng.random() < 0.2:  # a trial's failing state
-            msg.failed, msg.failure_reason = True, rng.choice(FAILURE_REASONS)
-            if msg.failure_reason == CartPoleState.FAILURE_POLE_ANGLE:
+            msg.failure = rng.choice([FAILURE_POLE_ANGLE, FAILURE_CART_POSITION])
+            if msg.failure == FAILURE_POLE_ANGLE:
                 msg.pole_angle_deg = rng.choice([-1, 1]) * rng.uniform(p.angle_limit_deg, 30)
             else:
                 msg.cart_position_m = rng.choice([-1, 1]) * rng.uniform(p.track_limit_m, 3)
@@ -141,9 +141,8 @@ class MessageMaker:
                                                                          1e3)
             else:
                 msg.successful_steps = p.max_steps + rng.randint(1, 1000)
-        elif category == "inconsistent":
-            msg.failed, msg.failure_reason = rng.choice(
-                [(True, ""), (False, CartPoleState.FAILURE_POLE_ANGLE), (True, "gremlins")])
+        elif category == "unknown_failure":
+            msg.failure = rng.randint(len(FAILURE_REASONS), 255)
         return msg
 
     def _SpikeVector(self, _tick: int, category: str) -> SpikeVector:
@@ -167,14 +166,13 @@ class MessageMaker:
 
     def _Reward(self, _tick: int, category: str) -> Reward:
         rng = self.rng
-        kind = rng.randrange(len(REWARD_KINDS))
-        msg = Reward(kind=REWARD_KINDS[kind], reward_one_hot=ONE_HOT[kind],
+        msg = Reward(reward_one_hot=rng.choice(list(ONE_HOT.values())),
                      success_counter=rng.randint(0, 255), trial_over=rng.random() < 0.1)
-        if category == "unknown_kind":
-            msg.kind = rng.choice(["jackpot", "", "REWARD", "punish ", "None"])
-        elif category == "inconsistent_code":
-            msg.reward_one_hot = rng.choice([c for c in (*ONE_HOT.values(), (1, 1))
-                                             if c != ONE_HOT[kind]])
+        if category == "both_lines":  # reward and punishment at once
+            msg.reward_one_hot = (1, 1)
+        elif category == "not_binary":
+            value = rng.randint(2, 255)
+            msg.reward_one_hot = rng.choice([(value, 0), (0, value), (value, value)])
         return msg
 
     def _Action(self, _tick: int, category: str) -> Action:

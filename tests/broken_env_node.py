@@ -13,7 +13,6 @@ import sys
 
 from clnn_ros.core.params import Params
 from clnn_ros.core.physics import CartPole
-from clnn_ros.graph.fields import tick_stamp
 from clnn_ros.nodes.environment import EnvironmentNode
 from clnn_ros.nodes.glue import run_node
 from clnn_ros_msgs.msg import Action, TrialEvent
@@ -43,8 +42,6 @@ class BrokenEnvironmentNode(EnvironmentNode):
         def publish_wrong_tick(msg) -> None:
             if "wrong_tick" in BUGS and msg.tick >= 2:
                 msg.tick += 1
-                msg.header.stamp.sec, msg.header.stamp.nanosec = tick_stamp(msg.tick,
-                                                                            self.tau_ns)
             publish(msg)
         self.refusals.refuse, self.state_pub.publish = accept_bad_force, publish_wrong_tick
 

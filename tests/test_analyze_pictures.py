@@ -82,8 +82,10 @@ def test_summary_names_the_run_and_every_picture(sample_analysis):
     summary = (sample_analysis / "summary.md").read_text()
     for name in (*PNGS, f"trial_{ANIMATED}.gif"):
         assert f"* `{name}`: " in summary, name
-    assert "* environment: not recorded in this bag" in summary  # recorded before it was kept
-    assert "* physics: parameter physics=paper, integrator=semi_implicit" in summary
+    assert "* environment: the built-in cart-pole node (`python -m clnn_ros.nodes.environment`)" \
+        in summary
+    assert "* physics: `paper` equations, `semi_implicit` integration (the built-in node's)" in \
+        summary
     assert "* encoding: pole angle (1 state variable), 6 inputs: `pole_angle[-inf,-6)deg`" in \
         summary
     assert "* velocity edge: not used: 1 state variable encodes the pole angle only" in summary

@@ -13,37 +13,23 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Byte, Empty, UInt8MultiArray
 
 from clnn_ros.echo import to_csv, to_yaml
-from clnn_ros_msgs.msg import CartPoleState, InputLabels, SpikeVector
+from clnn_ros_msgs.msg import CartPoleState, InputLabels, Reward, SpikeVector, TrialEvent
 
 from test_graph import wait_for_line
 
 from conftest import free_domain_id, ros_environment
 
 PROBE = Path(__file__).with_name("probe_participant.py")
-SPIKES_FIELDS = "{header: {stamp: {sec: 3, nanosec: 5}}, tick: 7, trial: 1, spikes: [0, 1, 0]}"
-SPIKES_BLOCK = """\
-header:
-  stamp:
-    sec: 3
-    nanosec: 5
-  frame_id: ''
-tick: 7
-trial: 1
-spikes:
-- 0
-- 1
-- 0
-"""
-SPIKES_FLOW = "{header: {stamp: {sec: 3, nanosec: 5}, frame_id: ''}, tick: 7, trial: 1, spikes: " \
-              "[0, 1, 0]}\n"
-SPIKES_CSV = "3,5,,7,1,0,1,0"
+SPIKES_FIELDS = "{tick: 7, trial: 1, spikes: [0, 1, 0]}"
+SPIKES_BLOCK = "tick: 7\ntrial: 1\nspikes:\n- 0\n- 1\n- 0\n"
+SPIKES_FLOW = "{tick: 7, trial: 1, spikes: [0, 1, 0]}\n"
+SPIKES_CSV = "7,1,0,1,0"
+CLOCK_FIELDS = "{clock: {sec: 3, nanosec: 5}}"  # a nested message
 LABELS = InputLabels(labels=["pole_angle[-1,0)deg", "b: c", "x"])
 
 
 def spikes() -> SpikeVector:
-    msg = SpikeVector(tick=7, trial=1, spikes=[0, 1, 0])
-    msg.header.stamp.sec, msg.header.stamp.nanosec = 3, 5
-    return msg
+    return SpikeVector(tick=7, trial=1, spikes=[0, 1, 0])
 
 
 def test_a_message_in_block_flow_and_csv_style():
@@ -60,13 +46,15 @@ def test_a_message_without_fields_is_braces_in_yaml_and_an_empty_csv_line():
 
 
 def test_scalars_bytes_and_arrays_as_rosidl_runtime_py_writes_them():
-    state = CartPoleState(pole_angle_deg=-1.5e-7, failed=True, failure_reason="pole_angle")
-    assert "\npole_angle_deg: -1.5e-07\npole_angular_velocity_deg_per_s: 0.0\nfailed: true\n" \
-           "failure_reason: pole_angle\n" in to_yaml(state)
-    assert to_csv(state).endswith(",0.0,-1.5e-07,0.0,True,pole_angle,0")
+    state = CartPoleState(pole_angle_deg=-1.5e-7, failure=CartPoleState.FAILURE_POLE_ANGLE)
+    assert "\npole_angle_deg: -1.5e-07\npole_angular_velocity_deg_per_s: 0.0\nfailure: 1\n" \
+           in to_yaml(state)
+    assert to_csv(state).endswith(",0.0,-1.5e-07,0.0,1,0")
+    reward = Reward(trial_over=True)
+    assert "\ntrial_over: true\n" in to_yaml(reward) and to_csv(reward).endswith(",True")
     # a field alone (--field): no YAML end-of-document marker after a scalar
-    assert to_yaml(state.failure_reason) == "pole_angle\n"
-    assert to_yaml(state.header.frame_id) == "''\n"
+    assert to_yaml(TrialEvent(end_reason="pole_angle").end_reason) == "pole_angle\n"
+    assert to_yaml(TrialEvent().end_reason) == "''\n"
     assert to_yaml(spikes().spikes) == "- 0\n- 1\n- 0\n" and to_csv(spikes().spikes) == "0,1,0"
     assert to_yaml(Byte(data=b"A")) == "data: A\n" and to_csv(Byte(data=b"A")) == "b'A'"
     imu = Imu()  # a fixed-size array is a numpy array
@@ -124,14 +112,16 @@ def echo_once(env, topic, *options) -> str:
 @pytest.mark.ros
 def test_echo_a_live_topic_in_each_style(ros_env):
     probes = [start_probe(ros_env, "/probe/spikes", "clnn_ros_msgs/msg/SpikeVector", SPIKES_FIELDS),
-              start_probe(ros_env, "/probe/empty", "std_msgs/msg/Empty", "{}")]
+              start_probe(ros_env, "/probe/empty", "std_msgs/msg/Empty", "{}"),
+              start_probe(ros_env, "/probe/clock", "rosgraph_msgs/msg/Clock", CLOCK_FIELDS)]
     try:
         assert echo_once(ros_env, "/probe/spikes") == SPIKES_BLOCK + "---\n"
         assert echo_once(ros_env, "/probe/spikes", "--flow-style") == SPIKES_FLOW + "---\n"
         assert echo_once(ros_env, "/probe/spikes", "--csv") == SPIKES_CSV + "\n"
-        assert echo_once(ros_env, "/probe/spikes", "--field", "header.stamp") == \
+        assert echo_once(ros_env, "/probe/clock", "--field", "clock") == \
             "sec: 3\nnanosec: 5\n---\n"
-        assert echo_once(ros_env, "/probe/spikes", "--field", "header.stamp", "--flow-style") \
+        assert echo_once(ros_env, "/probe/clock", "--field", "clock.nanosec") == "5\n---\n"
+        assert echo_once(ros_env, "/probe/clock", "--field", "clock", "--flow-style") \
             == "{sec: 3, nanosec: 5}\n---\n"
         assert echo_once(ros_env, "/probe/spikes", "--field", "spikes", "--csv") == "0,1,0\n"
         assert echo_once(ros_env, "/probe/spikes", "--field", "tick") == "7\n---\n"

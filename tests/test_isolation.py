@@ -142,15 +142,15 @@ def assert_equals_core(out: Path, seed: int):
 
 
 def recorded(out: Path) -> dict[str, list]:
-    """topic -> [(sim time (the header stamp), decoded message)] in the order recorded (one
+    """topic -> [(tick, decoded message)] in the order recorded (one
     publisher per topic). Not the log or publish time: they are the wall clock. Not the CDR bytes
     either: Fast CDR leaves the alignment padding between fields uninitialized, so equal messages
     may differ there."""
     from rclpy.serialization import deserialize_message
     by_topic = defaultdict(list)
-    for _, topic, sim_time, _, data, _ in raw_messages(out / "bag"):
+    for _, topic, tick, _, data, _ in raw_messages(out / "bag"):
         message_type = bag.message_class(names.TOPIC_TYPES[topic])
-        by_topic[topic].append((sim_time, deserialize_message(data, message_type)))
+        by_topic[topic].append((tick, deserialize_message(data, message_type)))
     return dict(by_topic)
 
 

@@ -56,14 +56,14 @@ def recorded(ros_env, tmp_path_factory):
     return out
 
 
-def tick_of(sim_ns: int) -> int:
-    return sim_ns // 20_000_000
-
-
 def raw_messages(path: Path, salvage=False):
+    """(schema, topic, tick, log_time, CDR bytes, recorded name) of each message in file order;
+    the tick read as the recorder reads it (bag.tick_of)."""
     reader, stream = bag.open_bag(path, salvage)
     with stream:
-        return list(bag.iter_raw(reader))
+        return [(schema, topic, bag.tick_of(data, 20_000_000, stamped=topic == names.CLOCK),
+                 log_time, data, name)
+                for schema, topic, log_time, data, name in bag.iter_raw(reader)]
 
 
 def gaps(ticks: list[int]) -> str:
@@ -75,7 +75,7 @@ def gaps(ticks: list[int]) -> str:
 def assert_every_tick(messages, topics=PER_TICK, last_state_tick=None, tail_allowance=0):
     """Each per-tick topic holds every tick from 0 to the last state's tick, no gap; but for
     the last `tail_allowance` ticks (what a process killed outright had not delivered yet)."""
-    ticks = {t: sorted(tick_of(m[2]) for m in messages if m[1] == t) for t in topics}
+    ticks = {t: sorted(m[2] for m in messages if m[1] == t) for t in topics}
     last = ticks[STATE][-1] if last_state_tick is None else last_state_tick
     whole = last + 1 - tail_allowance
     assert ticks[STATE][:whole] == list(range(whole)), f"{STATE}: {gaps(ticks[STATE])}"
@@ -127,9 +127,10 @@ def test_bag_layout_is_rosbag2(recorded):
         assert qos[0]["reliability"] == "reliable" and \
             qos[0]["durability"] == ("transient_local" if latched else "volatile")
         assert qos[0]["history"] == "unknown"  # DDS does not tell a publisher's history
-    text = summary.schemas[channels[STATE].schema_id].data.decode()
-    assert "\n" + "=" * 80 + "\nMSG: std_msgs/Header\n" in text
+    # a schema holds its dependencies' definitions (the state has none: no Header)
+    text = summary.schemas[channels[names.CLOCK].schema_id].data.decode()
     assert "\n" + "=" * 80 + "\nMSG: builtin_interfaces/Time\n" in text
+    assert "\nMSG: " not in summary.schemas[channels[STATE].schema_id].data.decode()
     assert summary.chunk_indexes and all(c.compression == "zstd" for c in summary.chunk_indexes)
     # The last `rosbag2` record (rosbag2 also writes one when the bag opens) is metadata.yaml's.
     info = yaml.safe_load(metadata["rosbag2"]["serialized_metadata"])
@@ -242,7 +243,7 @@ def test_two_independent_readers_decode_every_field(recorded):
         for _, channel, message in make_reader(f).iter_messages():
             raw[(names.graph_topic(channel.topic), message.sequence)] = message.data
             # as rosbag2: the publisher's source timestamp, then the receive time (wall clock)
-            assert bag.stamp_ns(message.data) < message.publish_time <= message.log_time
+            assert 0 < message.publish_time <= message.log_time
     by_mcap = {}
     for m in read_ros2_messages(path):
         key = (names.graph_topic(m.channel.topic), m.sequence_count)
@@ -265,8 +266,12 @@ def test_two_independent_readers_decode_every_field(recorded):
                                                   bag.message_class(names.TOPIC_TYPES[topic])))
         assert fields == installed, (topic, index)
         assert by_rosbags[(topic, index)] == installed, (topic, index)
-        if "tick" in fields:
-            assert fields["header"]["stamp"]["nanosec"] == fields["tick"] * 20_000_000 % 10**9
+        if "tick" in fields:  # read without decoding, as the recorder and analyze read it
+            assert bag.tick_of(raw[(topic, index)], 20_000_000) == fields["tick"]
+        elif topic == names.CLOCK:
+            clock = fields["clock"]
+            assert bag.tick_of(raw[(topic, index)], 20_000_000, stamped=True) == \
+                (clock["sec"] * 10**9 + clock["nanosec"]) // 20_000_000
 
 
 # --- faults ------------------------------------------------------------------------------------
@@ -323,16 +328,15 @@ def test_echo_topics_then_ctrl_c_leaves_a_complete_bag(ros_env, tmp_path):
     state = tool(ros_env, "clnn_ros.echo", names.absolute(STATE), "--once")
     assert state.returncode == 0 and state.stdout.endswith("\n---\n")
     fields = yaml.safe_load(state.stdout.split("---")[0])
-    assert list(fields) == ["header", "tick", "trial", "cart_position_m", "cart_velocity_m_per_s",
-                            "pole_angle_deg", "pole_angular_velocity_deg_per_s", "failed",
-                            "failure_reason", "successful_steps"]
-    assert fields["header"]["stamp"]["nanosec"] == fields["tick"] * 20_000_000 % 10**9
+    assert list(fields) == ["tick", "trial", "cart_position_m", "cart_velocity_m_per_s",
+                            "pole_angle_deg", "pole_angular_velocity_deg_per_s", "failure",
+                            "successful_steps"]
     spikes = tool(ros_env, "clnn_ros.echo", "/rln/spikes", "--once")
     assert "\nspikes:\n- " in spikes.stdout and "label" not in spikes.stdout
     labels = tool(ros_env, "clnn_ros.echo", "/rln/input_labels", "--once")  # latched: long sent
     assert labels.stdout.startswith("labels:\n- pole_angle[-inf,-6)deg\n"), labels.stdout
-    stamp = tool(ros_env, "clnn_ros.echo", "/rln/action", "--once", "--field", "header.stamp")
-    assert list(yaml.safe_load(stamp.stdout.split("---")[0])) == ["sec", "nanosec"]
+    tick = tool(ros_env, "clnn_ros.echo", "/rln/action", "--once", "--field", "tick")
+    assert isinstance(yaml.safe_load(tick.stdout.split("---")[0]), int), tick.stdout
     # Marked as the run's: if a wait below fails, the test's cleanup stops it too.
     raster = subprocess.Popen([sys.executable, "-m", "clnn_ros.echo", "/rln/spikes", "--raster"],
                               env={**ros_env, "CLNN_TEST_RUN": str(tmp_path)},
@@ -560,6 +564,23 @@ def test_sample_bag_analysis(tmp_path):
     assert alone.returncode == 0, alone.stderr
     assert (tmp_path / "from_file" / "trials.csv").read_text() == \
         (tmp_path / "trials.csv").read_text()
+
+
+def test_a_bag_of_before_the_lean_messages_is_analyzed(tmp_path):
+    """The first two chunks of the sample bag as recorded on 2026-12-03, whose messages began
+    with a std_msgs/Header (and named a failure in failure_reason): analyze reads their ticks
+    from the stamps and the trials' ends from the words, as the live run had them."""
+    result = analyze(REPO / "tests" / "data" / "header_era_seed0_2_chunks.mcap", "--salvage",
+                     "--out", tmp_path)
+    assert result.returncode == 0, result.stderr
+    with open(tmp_path / "trials.csv") as f:
+        rows = [(int(r["steps"]), r["end_reason"]) for r in csv.DictReader(f)]
+    assert rows == [(32, "cart_position"), (34, "cart_position"), (288, "cart_position"),
+                    (33, "cart_position")]  # the sample's first four trials
+    summary = (tmp_path / "summary.md").read_text()
+    assert "| `/cartpole/state` | `clnn_ros_msgs/msg/CartPoleState` | 566 | 0-565 | 0 |" in summary
+    assert "* environment: not recorded in this bag" in summary  # recorded before it was kept
+    assert "* physics: parameter physics=paper, integrator=semi_implicit" in summary
 
 
 @pytest.mark.ros

@@ -11,7 +11,8 @@ one MCAP file NAME/NAME_0.mcap (profile ros2):
 * channel metadata `topic_type_hash` (RIHS01, from <prefix>/share/<pkg>/msg/<Type>.json) and
   `offered_qos_profiles` (the publishers' QoS, a YAML list as version 9 has it);
 * log_time = the receive time and publish_time = the publisher's source timestamp (both wall
-  clock, ns, from DDS, as Jazzy's recorder sets them); the sim time is in each message's header;
+  clock, ns, from DDS, as Jazzy's recorder sets them); each message's sim time is its tick * tau
+  (its first field, read by `tick_of`), /clock's its stamp;
 * `rosbag2` metadata records (serialized_metadata: one when the bag opens, the final one when it
   is closed, as rosbag2's writer does) and a `clnn_ros` record with the run's parameters;
 * zstd chunks closed every CHUNK_SECONDS (or CHUNK_BYTES) and written through to the file, so a
@@ -29,10 +30,11 @@ rclpy. The names below are those the recorder, run_all, echo and analyze use.
 """
 
 from .directory import METADATA_FILE, foreign_files, remove_bag
-from .reader import BagError, Decoder, iter_raw, mcap_file, metadata, open_bag, stamp_ns
+from .reader import (BagError, Decoder, begins_with_a_stamp, iter_raw, mcap_file, metadata,
+                     open_bag, tick_of)
 from .schemas import message_class, schema_text, type_hash
 from .writer import CHUNK_SECONDS, BagWriter, qos_dicts
 
-__all__ = ["METADATA_FILE", "foreign_files", "remove_bag", "BagError", "Decoder", "iter_raw",
-           "mcap_file", "metadata", "open_bag", "stamp_ns", "message_class", "schema_text", "type_hash",
-           "CHUNK_SECONDS", "BagWriter", "qos_dicts"]
+__all__ = ["METADATA_FILE", "foreign_files", "remove_bag", "BagError", "Decoder",
+           "begins_with_a_stamp", "iter_raw", "mcap_file", "metadata", "open_bag", "tick_of",
+           "message_class", "schema_text", "type_hash", "CHUNK_SECONDS", "BagWriter", "qos_dicts"]

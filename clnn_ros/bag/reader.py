@@ -19,13 +19,26 @@ class BagError(Exception):
     """A bag that cannot be read (missing, not MCAP, truncated, not one of ours): one line."""
 
 
-def stamp_ns(cdr: bytes) -> int:
-    """Sim time of a serialized message whose first field is a builtin_interfaces/Time (every
-    message of the graph: the Header's stamp, or Clock.clock), without deserializing it."""
+def tick_of(cdr: bytes, tau_ns: int, stamped: bool = False) -> int:
+    """The tick of a serialized message of the graph, without deserializing it: its first field
+    (uint64 tick), or where its first field is a sim-time stamp (`stamped`: /clock, and the
+    graph's messages in bags of before 2026-12-04, which began with a std_msgs/Header) that time
+    over tau. -1 for a message too short to hold one."""
     if len(cdr) < 12:
-        return 0
-    sec, nanosec = struct.unpack_from("<iI" if cdr[1] & 1 else ">iI", cdr, 4)
-    return stamp_nanoseconds(sec, nanosec)
+        return -1
+    little = cdr[1] & 1  # the CDR encapsulation: little- or big-endian
+    if stamped:
+        sec, nanosec = struct.unpack_from("<iI" if little else ">iI", cdr, 4)
+        return stamp_nanoseconds(sec, nanosec) // tau_ns
+    return struct.unpack_from("<Q" if little else ">Q", cdr, 4)[0]
+
+
+def begins_with_a_stamp(schema) -> bool:
+    """Whether the messages of a bag's schema begin with a builtin_interfaces/Time (tick_of's
+    `stamped`): the first field of its .msg text is a Clock's or a Header."""
+    fields = (line.split("#")[0].split() for line in schema.data.decode().splitlines())
+    first = next((field for field in fields if len(field) == 2 and "=" not in field[1]), None)
+    return first is not None and first[0] in ("builtin_interfaces/Time", "std_msgs/Header")
 
 
 def mcap_file(path) -> Path:
@@ -95,7 +108,7 @@ def open_bag(path, salvage: bool = False):
 
 
 def iter_raw(reader, topics=None):
-    """(schema, topic, sim time (ns: the header stamp), log_time, cdr bytes, recorded topic name)
+    """(schema, topic, log_time, cdr bytes, recorded topic name)
     of the bag's messages in file order, the graph's topics by their relative names (a run in a
     namespace reads as any other: "/robot1/clock" is "clock"); a salvaged (truncated) file ends
     quietly at its last complete record."""
@@ -104,8 +117,8 @@ def iter_raw(reader, topics=None):
     try:
         for schema, channel, message in reader.iter_messages(topics=topics,
                                                              log_time_order=False):
-            yield (schema, graph_topic(channel.topic), stamp_ns(message.data), message.log_time,
-                   message.data, channel.topic)
+            yield (schema, graph_topic(channel.topic), message.log_time, message.data,
+                   channel.topic)
     except (McapError, EOFError, struct.error, ValueError) as error:
         if not isinstance(reader, NonSeekingReader):
             raise BagError(f"damaged MCAP: {error}") from None

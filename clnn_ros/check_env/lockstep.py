@@ -8,6 +8,7 @@ from typing import Callable
 
 from clnn_ros_msgs.msg import CartPoleState, TrialEvent
 
+from ..graph.fields import FAILURE_NONE
 from ..graph.names import STATE
 from .probe import QUIET_S, REPLY_S, Probe
 from .rules import (Abort, Findings, check_failure, check_finite, check_reset,
@@ -101,9 +102,9 @@ class Lockstep:
         self.findings.checked.add("successful_steps")
         self.findings.fail_all("successful_steps", check_step_counted(msg, self.steps, t,
                                                                       self.trial))
-        self.steps += not msg.failed
+        self.steps += msg.failure == FAILURE_NONE
         if before is not None and before.tick == t - 1 and before.trial == msg.trial and \
-                msg.tick == t and not before.failed:
+                msg.tick == t and before.failure == FAILURE_NONE:
             self.transitions.append((values(before), direction, values(msg), t))
         return msg
 

@@ -62,24 +62,18 @@ class Harness(Node):
             self.create_subscription(CartPoleState, STATE, lambda _msg: None, LOCKSTEP_QOS)
         self.create_subscription(String, READY, lambda m: self.ready.append(m.data), READY_QOS)
 
-    @staticmethod
-    def stamp(msg, tick: int, trial: int):
-        msg.header.stamp.sec, msg.header.stamp.nanosec = tick_stamp(tick, TAU_NS)
-        msg.tick, msg.trial = tick, trial
-        return msg
-
     def clock(self, tick: int) -> None:
         msg = Clock()
         msg.clock.sec, msg.clock.nanosec = tick_stamp(tick, TAU_NS)
         self.clock_pub.publish(msg)
 
     def event(self, kind: int, tick: int, trial: int, angle: float = 0.0) -> None:
-        self.event_pub.publish(self.stamp(TrialEvent(event=kind, initial_angle_deg=angle),
-                                          tick, trial))
+        self.event_pub.publish(TrialEvent(tick=tick, trial=trial, event=kind,
+                                          initial_angle_deg=angle))
 
     def action(self, tick: int, trial: int, direction: int) -> None:
-        self.action_pub.publish(self.stamp(Action(force_direction=direction,
-                                                  force_n=FORCE_N * direction), tick, trial))
+        self.action_pub.publish(Action(tick=tick, trial=trial, force_direction=direction,
+                                       force_n=FORCE_N * direction))
 
 
 class Probe:

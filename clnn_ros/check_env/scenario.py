@@ -8,6 +8,7 @@ import subprocess
 
 from clnn_ros_msgs.msg import TrialEvent
 
+from ..graph.fields import FAILURE_NONE
 from ..graph.names import STATE
 from ..process_signals import EXIT_WITH_STDIN
 from .interface import connect
@@ -55,7 +56,7 @@ def play_episode(play: Lockstep) -> None:
         7: (lambda t: node.event(TrialEvent.START, t, play.trial + 1, 0.5),
             "does not refuse a START in the middle of a trial"),
     }
-    while not msg.failed and play.steps < MAX_STEPS:
+    while msg.failure == FAILURE_NONE and play.steps < MAX_STEPS:
         t = play.tick
         direction = play.balance(msg)
         order = {1: "action first", 2: "clock first"}.get(t, "both")
@@ -72,7 +73,7 @@ def play_episode(play: Lockstep) -> None:
             msg = play.last
             continue
         msg = play.step(direction, order)
-    if msg.failed:
+    if msg.failure != FAILURE_NONE:
         play.findings.not_checked(
             "successful_steps", f"the checker's controller kept the pole up for only "
                                 f"{msg.successful_steps} of the max_steps {MAX_STEPS} steps")
@@ -88,10 +89,10 @@ def play_episode(play: Lockstep) -> None:
         play.end_trial()
     # trial 1: constant +F until the trial fails
     msg = play.start(-0.5, "start only" if play.tick == t else "clock first")
-    while not msg.failed and play.steps < MAX_STEPS:
+    while msg.failure == FAILURE_NONE and play.steps < MAX_STEPS:
         msg = play.step(1)
     play.findings.checked.add("failure")
-    if not msg.failed:
+    if msg.failure == FAILURE_NONE:
         play.findings.fail("failure", f"constant +F for max_steps {MAX_STEPS} steps did not "
                                       f"fail the trial (pole at {msg.pole_angle_deg:.2f} deg, "
                                       f"cart at {msg.cart_position_m:.2f} m)")

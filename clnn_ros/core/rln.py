@@ -42,7 +42,8 @@ from .jitable import jitable, kernel, tick_kernel
 from .params import Params
 from .random_stream import next_uniform
 # The rule's constants and options, as numbers (also imported from here by the rest)
-from .rule import NONE, ONE_HOT, PUNISH, REWARD, REWARD_KINDS, TIE_EXACT, TIE_RANDOM, Rule
+from .rule import (KIND_OF_CODE, NONE, ONE_HOT, PUNISH, REWARD, REWARD_KINDS, TIE_EXACT, TIE_RANDOM,
+                   Rule)
 
 
 # ---- inference (section 2.2) -------------------------------------------------------------------

@@ -14,6 +14,7 @@ from .params import TIE_BREAKS, Params
 NONE, REWARD, PUNISH = 0, 1, 2  # the reward kinds, after each step
 REWARD_KINDS = ("none", "reward", "punish")
 ONE_HOT = {NONE: (0, 0), REWARD: (1, 0), PUNISH: (0, 1)}  # the paper's R code
+KIND_OF_CODE = {code: kind for kind, code in ONE_HOT.items()}
 TIE_EXACT, TIE_RANDOM = TIE_BREAKS.index("exact"), TIE_BREAKS.index("random")
 
 

@@ -9,13 +9,12 @@ from __future__ import annotations
 import math
 
 from ..core.params import Params
-from ..core.rln import ONE_HOT, REWARD_KINDS
-from .fields import EPISODE_END, END, FAILURE_REASONS as REASONS, START
+from ..core.rln import KIND_OF_CODE
+from .fields import EPISODE_END, END, FAILURE_NONE, FAILURE_REASONS, START
 from .names import ACTION, CLOCK, REWARD, SPIKES, STATE, TRIAL_EVENT, WEIGHTS
 
 N_NEURONS = 2  # the agent's two RLNs: negative and positive force
 EVENT_KINDS = (START, END, EPISODE_END)
-FAILURE_REASONS = REASONS[1:]  # a failed state's failure_reason
 # A simulator's limit check may differ from the message's degrees in the last bits (gymnasium
 # works in radians): a state that did not fail may lie this far beyond a limit.
 LIMIT_TOLERANCE = 1e-6
@@ -46,10 +45,11 @@ def state_problem(msg, p: Params) -> str | None:
         return f"non-finite state {values}"
     if msg.successful_steps > p.max_steps:
         return f"{msg.successful_steps} successful steps, more than max_steps {p.max_steps}"
-    if msg.failed != (msg.failure_reason in FAILURE_REASONS):
-        return f"failed {msg.failed} with failure_reason {msg.failure_reason!r}"
-    if not msg.failed and (abs(msg.pole_angle_deg) > p.angle_limit_deg + LIMIT_TOLERANCE or
-                           abs(msg.cart_position_m) > p.track_limit_m + LIMIT_TOLERANCE):
+    if msg.failure >= len(FAILURE_REASONS):
+        return f"failure {msg.failure} is not one of CartPoleState's FAILURE_* codes"
+    if msg.failure == FAILURE_NONE and (
+            abs(msg.pole_angle_deg) > p.angle_limit_deg + LIMIT_TOLERANCE or
+            abs(msg.cart_position_m) > p.track_limit_m + LIMIT_TOLERANCE):
         return f"out of range: pole angle {msg.pole_angle_deg} deg, cart position " \
                f"{msg.cart_position_m} m, but not failed"
     return None
@@ -65,9 +65,8 @@ def spikes_problem(msg, p: Params) -> str | None:
 
 
 def reward_problem(msg, _p: Params) -> str | None:
-    if msg.kind not in REWARD_KINDS or tuple(msg.reward_one_hot) != \
-            ONE_HOT[REWARD_KINDS.index(msg.kind)]:
-        return f"kind {msg.kind!r} with code {list(msg.reward_one_hot)}"
+    if tuple(msg.reward_one_hot.tolist()) not in KIND_OF_CODE:
+        return f"code {msg.reward_one_hot.tolist()} is not [0, 0], [1, 0] or [0, 1]"
     return None
 
 

@@ -7,8 +7,9 @@ import io
 
 # TrialEvent.event
 START, END, EPISODE_END = 0, 1, 2
-# CartPoleState.failure_reason, by the physics status of core.physics (CONTINUE, FAIL_ANGLE,
-# FAIL_POSITION): "" while the trial goes on.
+# CartPoleState.failure: the physics status of core.physics (CONTINUE, FAIL_ANGLE, FAIL_POSITION)
+FAILURE_NONE, FAILURE_POLE_ANGLE, FAILURE_CART_POSITION = 0, 1, 2
+# ... and each one's name, as TrialEvent.end_reason and trials.csv write it ("": none).
 FAILURE_REASONS = ("", "pole_angle", "cart_position")
 # TrialEvent.end_reason of a trial that reached max_steps (one that failed: its failure_reason).
 REACHED_MAX_STEPS = "max_steps"
@@ -26,7 +27,7 @@ def tick_nanoseconds(tau_s: float) -> int:
 
 
 def tick_stamp(tick: int, tau_ns: int) -> tuple[int, int]:
-    """(sec, nanosec) of the sim time of `tick`: the header stamp and /clock of that tick."""
+    """(sec, nanosec) of the sim time of `tick`: its /clock (and its markers' stamp)."""
     return divmod(tick * tau_ns, NANOSECONDS)
 
 

@@ -22,15 +22,14 @@ from std_srvs.srv import Trigger
 
 from ..core.checkpoint import capture, save_checkpoint
 from ..core.episode import start_episode
-from ..core.rln import REWARD_KINDS
+from ..core.rln import KIND_OF_CODE
 from ..files import describe_write_error
 from ..init_weights import episode_start
-from ..graph.fields import tick_nanoseconds
 from ..graph.lockstep import Refusals, TickJoin
 from ..graph.names import ACTION, REWARD, SAVE_CHECKPOINT, SPIKES, TRIAL_EVENT, WEIGHTS
 from ..graph.run import NODE_PARAMETERS
 from .glue import (LOCKSTEP_QOS, Readiness, checked, declare_run_parameters,
-                   endpoints_matched, ends_with_the_episode, run_node, stamp, use_sim_time)
+                   endpoints_matched, ends_with_the_episode, run_node, use_sim_time)
 
 
 class AgentNode(Node):
@@ -38,7 +37,6 @@ class AgentNode(Node):
         super().__init__("agent", **node_options)
         self.params, self.settings = declare_run_parameters(self, run)
         use_sim_time(self, "agent")
-        self.tau_ns = tick_nanoseconds(self.params.tau)
         # the seed's weights, or those of init_weights (a checkpoint: its whole state)
         start = episode_start(self.settings["init_weights"], self.settings["seed"], self.params,
                               NODE_PARAMETERS["agent"])
@@ -74,7 +72,7 @@ class AgentNode(Node):
             self.trial, self.trial_start_tick = reward.trial, reward.tick
             self.agent.begin_trial(reward.trial)
         else:
-            self.agent.learn(REWARD_KINDS.index(reward.kind))
+            self.agent.learn(KIND_OF_CODE[tuple(reward.reward_one_hot.tolist())])
         self.counter.count = reward.success_counter  # the reward node's count, for checkpoints
         self.last_tick = reward.tick
         self.next_trial = reward.trial + 1 if reward.trial_over else reward.trial
@@ -88,7 +86,8 @@ class AgentNode(Node):
             action.force_direction = 1 if neuron else -1
             action.force_n = self.params.force if neuron else -self.params.force
             action.winning_neuron, action.winning_segment = neuron, segment
-        self.action_pub.publish(stamp(action, reward.tick, reward.trial, self.tau_ns))
+        action.tick, action.trial = reward.tick, reward.trial
+        self.action_pub.publish(action)
         if reward.trial_over:
             try:
                 self.save("checkpoint.npz")  # before the weights: on disk when the episode ends
@@ -98,9 +97,9 @@ class AgentNode(Node):
                 self.finished.set_result(1)
                 return
             w = self.agent.weights
-            self.weights_pub.publish(stamp(WeightSnapshot(
-                neurons=w.shape[0], segments=w.shape[1], inputs=w.shape[2],
-                weights=w.ravel().tolist()), reward.tick, reward.trial, self.tau_ns))
+            self.weights_pub.publish(WeightSnapshot(
+                tick=reward.tick, trial=reward.trial, neurons=w.shape[0], segments=w.shape[1],
+                inputs=w.shape[2], weights=w.ravel().tolist()))
 
     def save(self, name: str) -> Path | None:
         """Save the state after the last completed tick to <out_dir>/name; None without an

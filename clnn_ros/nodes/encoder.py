@@ -14,11 +14,10 @@ from rclpy.node import Node
 from rclpy.task import Future
 
 from ..core.encoder import Encoder
-from ..graph.fields import tick_nanoseconds
 from ..graph.lockstep import Refusals, TickJoin
 from ..graph.names import INPUT_LABELS, SPIKES, STATE, TRIAL_EVENT
 from .glue import (LABELS_QOS, LOCKSTEP_QOS, Readiness, checked, declare_run_parameters,
-                   endpoints_matched, ends_with_the_episode, run_node, stamp, use_sim_time)
+                   endpoints_matched, ends_with_the_episode, run_node, use_sim_time)
 
 
 class EncoderNode(Node):
@@ -26,7 +25,6 @@ class EncoderNode(Node):
         super().__init__("encoder", **node_options)
         self.params, settings = declare_run_parameters(self, run)
         use_sim_time(self, "encoder")
-        self.tau_ns = tick_nanoseconds(self.params.tau)
         self.encoder = Encoder.from_params(self.params)
         self.finished, self.failure = Future(), None
         self.refusals = Refusals(self.get_logger().error)
@@ -53,8 +51,8 @@ class EncoderNode(Node):
         spikes = self.encoder.spikes((msg.cart_position_m, msg.cart_velocity_m_per_s,
                                       msg.pole_angle_deg, msg.pole_angular_velocity_deg_per_s))
         out = self.spikes_msg
-        out.spikes = spikes.tobytes()
-        self.spikes_pub.publish(stamp(out, msg.tick, msg.trial, self.tau_ns))
+        out.tick, out.trial, out.spikes = msg.tick, msg.trial, spikes.tobytes()
+        self.spikes_pub.publish(out)
 
 
 def main() -> None:

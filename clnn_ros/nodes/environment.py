@@ -28,12 +28,12 @@ from visualization_msgs.msg import MarkerArray
 
 from ..core.params import ParamError, Params
 from ..core.physics import CONTINUE, CartPole
-from ..graph.fields import FAILURE_REASONS, stamp_nanoseconds, tick_nanoseconds
+from ..graph.fields import stamp_nanoseconds, tick_nanoseconds, tick_stamp
 from ..graph.lockstep import Refusals
 from ..graph.names import ACTION, CLOCK, MARKERS, STATE, TRIAL_EVENT
 from .glue import (LOCKSTEP_QOS, Readiness, checked, declare_run_parameters,
-                   endpoints_matched, ends_with_the_episode, run_node, stamp, use_sim_time)
-from ..markers import FRAME, CartPoleMarkers
+                   endpoints_matched, ends_with_the_episode, run_node, use_sim_time)
+from ..markers import CartPoleMarkers
 
 
 def simulator(name: str, params: Params):
@@ -72,7 +72,6 @@ class EnvironmentNode(Node):
         self.over_tick = None  # tick of the last state of the trial that just ended
         self.pending = {}  # this tick's inputs by topic: /clock, and START or the action
         self.state_msg = CartPoleState()
-        self.state_msg.header.frame_id = FRAME  # the frame cart_position_m is measured in
         self.finished, self.failure = Future(), None
         self.refusals = Refusals(self.get_logger().error)
         self.state_pub = self.create_publisher(CartPoleState, STATE, LOCKSTEP_QOS)
@@ -155,12 +154,13 @@ class EnvironmentNode(Node):
         state = self.state_msg  # one message object, refilled each tick (publish copies it)
         (state.cart_position_m, state.cart_velocity_m_per_s, state.pole_angle_deg,
          state.pole_angular_velocity_deg_per_s) = self.cartpole.state
-        state.failed, state.failure_reason = status != CONTINUE, FAILURE_REASONS[status]
+        state.failure = status  # the physics status is the message's failure code
+        state.tick, state.trial = self.tick, self.trial
         state.successful_steps = self.successful_steps
-        self.state_pub.publish(stamp(state, self.tick, self.trial, self.tau_ns))
+        self.state_pub.publish(state)
         if self.markers_pub and self.tick % self.marker_period == 0:
             self.markers_pub.publish(self.markers.update(
-                state.header.stamp, state.cart_position_m, state.pole_angle_deg))
+                tick_stamp(self.tick, self.tau_ns), state.cart_position_m, state.pole_angle_deg))
         self.tick += 1
 
 

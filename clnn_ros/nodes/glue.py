@@ -21,7 +21,7 @@ from std_msgs.msg import String
 from ..core.params import ParamError, Params
 from ..graph import qos
 from ..graph.content import RULES
-from ..graph.fields import EPISODE_END, tick_stamp
+from ..graph.fields import EPISODE_END
 from ..graph.lockstep import Refusals, episode_end_problem
 from ..graph.names import READY, SIM_TIME_NODES, TRIAL_EVENT
 from ..graph.run import (DESCRIPTIONS, declared_values, node_parameters, read_params_file,
@@ -98,13 +98,6 @@ def checked(topic: str, params: Params, refusals: Refusals, callback: Callable):
         else:
             refusals.refuse(topic, msg, reason, kind="content")
     return receive
-
-
-def stamp(msg, tick: int, trial: int, tau_ns: int):
-    """Fill the fields every message of the graph has: the tick's sim time, tick and trial."""
-    msg.header.stamp.sec, msg.header.stamp.nanosec = tick_stamp(tick, tau_ns)
-    msg.tick, msg.trial = tick, trial
-    return msg
 
 
 def ends_with_the_episode(finished: Future, refusals: Refusals,
@@ -252,7 +245,7 @@ def use_sim_time(node: Node, role: str) -> None:
     from the trial manager) if the role is one of names.SIM_TIME_NODES (the environment: the
     contract of docs/ENV_CONTRACT.md) or if it was started with -p use_sim_time:=true, its own
     time otherwise. The encoder, reward and agent
-    read no ROS time (every stamp comes from a message's tick), and the /clock delivery that
+    read no ROS time (the tick of their inputs is their time), and the /clock delivery that
     rclpy's TimeSource takes for use_sim_time cost about a sixth of the CPU of a tick
     (docs/benchmark_graph.md). A later change of use_sim_time is refused, as every other
     parameter is (read-only)."""

@@ -137,7 +137,6 @@ class RecorderNode(Node):
             if self.failure:
                 return
             self.last_message_at = time.monotonic()
-            stamp = bag.stamp_ns(data)
             try:
                 self.bag.write(self._channel(topic), info["received_timestamp"],
                                info["source_timestamp"], data, self.counts[topic])
@@ -145,7 +144,7 @@ class RecorderNode(Node):
                 self._write_failed(error)
                 return
             if topic in PER_TICK:
-                tick = stamp // self.tau_ns
+                tick = bag.tick_of(data, self.tau_ns, stamped=topic == CLOCK)
                 self.ticks[topic].add(tick)
                 self.latest[topic] = max(self.latest.get(topic, -1), tick)
             self.counts[topic] += 1

@@ -13,14 +13,13 @@ from clnn_ros_msgs.msg import CartPoleState, Reward, TrialEvent
 from rclpy.node import Node
 from rclpy.task import Future
 
-from ..core.rln import NONE, ONE_HOT, REWARD_KINDS
-from ..graph.fields import tick_nanoseconds
+from ..core.rln import NONE, ONE_HOT
 from ..graph.lockstep import Refusals, TickJoin
 from ..graph.names import REWARD, STATE, TRIAL_EVENT
 from ..graph.run import NODE_PARAMETERS
 from ..init_weights import episode_start
 from .glue import (LOCKSTEP_QOS, Readiness, checked, declare_run_parameters,
-                   endpoints_matched, ends_with_the_episode, run_node, stamp, use_sim_time)
+                   endpoints_matched, ends_with_the_episode, run_node, use_sim_time)
 
 
 class RewardNode(Node):
@@ -28,7 +27,6 @@ class RewardNode(Node):
         super().__init__("reward", **node_options)
         self.params, settings = declare_run_parameters(self, run)
         use_sim_time(self, "reward")
-        self.tau_ns = tick_nanoseconds(self.params.tau)
         # a resumed episode (init_weights: a checkpoint) continues a carried success count
         self.counter = episode_start(settings["init_weights"], settings["seed"], self.params,
                                      NODE_PARAMETERS["reward"]).success_counter(self.params)
@@ -53,17 +51,18 @@ class RewardNode(Node):
 
     def on_tick(self, inbox: dict) -> None:
         msg = inbox[STATE]
+        failed = msg.failure != CartPoleState.FAILURE_NONE
         if msg.trial != self.trial:  # the trial's first state: no step has been taken yet
             self.trial = msg.trial
             self.counter.begin_trial()
             kind = NONE
         else:
-            kind = self.counter.outcome(msg.failed)
+            kind = self.counter.outcome(failed)
         out = self.reward_msg
-        out.reward_one_hot, out.kind = ONE_HOT[kind], REWARD_KINDS[kind]
+        out.tick, out.trial, out.reward_one_hot = msg.tick, msg.trial, ONE_HOT[kind]
         out.success_counter = self.counter.count
-        out.trial_over = msg.failed or msg.successful_steps >= self.params.max_steps
-        self.reward_pub.publish(stamp(out, msg.tick, msg.trial, self.tau_ns))
+        out.trial_over = failed or msg.successful_steps >= self.params.max_steps
+        self.reward_pub.publish(out)
 
 
 def main() -> None:

@@ -43,7 +43,7 @@ from std_msgs.msg import String, UInt64
 
 from ..core.episode import seed_setup
 from ..files import describe_write_error, write_atomically, write_text_atomically
-from ..graph.fields import REACHED_MAX_STEPS, tick_nanoseconds, tick_stamp, trials_csv
+from ..graph.fields import END_REASONS, tick_nanoseconds, tick_stamp, trials_csv
 from ..graph.lockstep import Refusals, RunningTime, TickJoin
 from ..graph.names import (ACTION, CLOCK, GRAPH_NODES, NOT_STARTED, PUBLISHED_BY, READY,
                            RECORDED, RECORDER, REWARD, SPIKES, STATE, TRIAL_EVENT, TRIAL_MANAGER,
@@ -53,7 +53,7 @@ from ..graph.run import NODE_PARAMETERS, names_list
 from ..graph.watch import describe_foreign, foreign_publishers, gone, named_twice
 from ..init_weights import episode_start
 from .glue import (LOCKSTEP_QOS, PROGRESS_QOS, READY_QOS, Readiness, checked,
-                   declare_run_parameters, endpoints_matched, run_node, stamp, steady_clock,
+                   declare_run_parameters, endpoints_matched, run_node, steady_clock,
                    use_sim_time)
 
 WATCHDOG_S = 0.1
@@ -290,9 +290,9 @@ class TrialManagerNode(Node):
             self.held = (tick, starts_trial)
             return
         if starts_trial:
-            self.event_pub.publish(stamp(TrialEvent(
-                event=TrialEvent.START, initial_angle_deg=float(self.angles[self.trial]),
-                seed=self.settings["seed"]), tick, self.trial, self.tau_ns))
+            self.event_pub.publish(TrialEvent(
+                tick=tick, trial=self.trial, event=TrialEvent.START,
+                initial_angle_deg=float(self.angles[self.trial]), seed=self.settings["seed"]))
         self.publish_clock(tick)
 
     def publish_clock(self, tick: int) -> None:
@@ -307,14 +307,15 @@ class TrialManagerNode(Node):
         if action.force_direction != 0:
             self.advance(tick + 1, starts_trial=False)
             return
-        reason = state.failure_reason or REACHED_MAX_STEPS
+        reason = END_REASONS[state.failure]
         self.trial_end_tick = tick
         self.results.append((self.trial, float(self.angles[self.trial]), state.successful_steps,
                              reason))
-        self.event_pub.publish(stamp(TrialEvent(
-            event=TrialEvent.END, initial_angle_deg=float(self.angles[self.trial]),
+        self.event_pub.publish(TrialEvent(
+            tick=tick, trial=self.trial, event=TrialEvent.END,
+            initial_angle_deg=float(self.angles[self.trial]),
             successful_steps=state.successful_steps, end_reason=reason,
-            seed=self.settings["seed"]), tick, self.trial, self.tau_ns))
+            seed=self.settings["seed"]))
         self.report(tick)
         if problem := self.save(self.write_trials):
             self.stop(1, problem, tick)
@@ -345,10 +346,10 @@ class TrialManagerNode(Node):
         if self.finished.done():
             return
         tick = self.join.tick if tick is None else tick
-        self.event_pub.publish(stamp(TrialEvent(
-            event=TrialEvent.EPISODE_END, end_reason=reason, seed=self.settings["seed"],
-            successful_steps=self.results[-1][2] if self.results else 0), tick, self.trial,
-            self.tau_ns))
+        self.event_pub.publish(TrialEvent(
+            tick=tick, trial=self.trial, event=TrialEvent.EPISODE_END, end_reason=reason,
+            seed=self.settings["seed"],
+            successful_steps=self.results[-1][2] if self.results else 0))
         self.exit_reason = reason
         if (problem := self.save(self.write_results, tick)) and not exit_code:
             exit_code, reason = 1, problem
