@@ -11,7 +11,7 @@ import time
 from contextlib import contextmanager
 from typing import Callable, Iterator
 
-from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
+from . import rosenv  # loopback DDS discovery by default, before rclpy loads
 
 import rclpy
 import rclpy.logging
@@ -52,10 +52,13 @@ ROS_ARGS_USAGE = "expected --ros-args [-p name:=value] [--params-file FILE] [--l
 def init_ros(argv: list[str]) -> None:
     """rclpy.init with SIGINT/SIGTERM left to catch_signals. ROS arguments that rcl refuses (a
     bad -p rule, an unknown argument, a params file it cannot parse or that holds no
-    parameters) end the process with one line `<prog>: error: ...` and exit status 2."""
+    parameters) and a ROS_DOMAIN_ID out of range end the process with one line
+    `<prog>: error: ...` and exit status 2."""
     prog = os.path.basename(argv[0]) if argv else "rclpy"
     arguments = split_ros_arguments(argv)[0]
     try:
+        if problem := rosenv.domain_id_problem():
+            raise ParamError(problem)
         for option, value in zip(arguments, arguments[1:]):
             if option == "--params-file":
                 read_params_file(value)

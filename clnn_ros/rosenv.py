@@ -11,6 +11,19 @@ os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE",
                       str(Path(__file__).with_name("fastdds_profile.xml")))
 
 
+# Fast DDS numbers a domain's ports 7400 + 250 x domain: past 232 they pass 65535, and its
+# participant prints so and ends the process with status 1, past any handler.
+MAX_DOMAIN_ID = 232
+
+
+def domain_id_problem() -> str | None:
+    """Why ROS_DOMAIN_ID cannot be used, or None (unset or empty is rcl's default domain)."""
+    value = os.environ.get("ROS_DOMAIN_ID", "")
+    if value == "" or (value.isdigit() and int(value) <= MAX_DOMAIN_ID):
+        return None
+    return f"ROS_DOMAIN_ID {value!r} is not a domain: an integer from 0 to {MAX_DOMAIN_ID}"
+
+
 SHM = "/dev/shm"
 # Set by a supervisor (run_all) that removes its processes' leftover Fast DDS files itself: a
 # node process then leaves the removal to it and ends sooner (a scan of every process and up to

@@ -42,6 +42,7 @@ from .graph.run import DEMO, ENVIRONMENTS, OWN_TAU, RUN_SETTINGS, default_bag_pa
 from .graph.ticks import TICKS_RECORD, TickRanges, describe_ranges
 from .init_weights import OPTIMAL, episode_start
 from .process_signals import STOP_SIGNALS, catch_signals
+from .rosenv import domain_id_problem
 from .supervise import (NODES, Supervisor, fresh_summary, report_failure, run_separate, say,
                         start_recorder, stop_recorder)
 
@@ -205,6 +206,8 @@ def checkpoint_values(checkpoint: Checkpoint) -> dict:
 def main(argv=None) -> int:
     args = parse_args(argv)
     try:
+        if problem := domain_id_problem():
+            raise ParamError(problem)
         checkpoint = load_checkpoint(args.init_weights) \
             if args.init_weights and args.init_weights.endswith(".npz") else None
         values = build_parameters(args, checkpoint)

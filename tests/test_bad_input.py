@@ -216,6 +216,25 @@ def test_a_node_started_by_hand_refuses_bad_parameters(workdir, node, ros_args, 
     assert_one_error_line(result.stderr, f"{node}.py", message)
 
 
+@pytest.mark.parametrize("domain", ["233", "-1", "one"])
+@pytest.mark.parametrize("program", [["-m", "clnn_ros.run_all", "--trials", "1"],
+                                     ["-m", "clnn_ros.nodes.agent"],
+                                     ["-m", "clnn_ros.echo", "/rln/spikes"]])
+def test_a_domain_id_dds_cannot_use_is_refused_before_ros_starts(workdir, monkeypatch, program,
+                                                                  domain):
+    """Fast DDS ends a process whose domain has ports past 65535 with status 1 and a line on
+    standard output, and rcl takes -1 for the default domain: each program refuses them first."""
+    monkeypatch.setenv("ROS_DOMAIN_ID", domain)
+    before = listing(workdir)
+    result = subprocess.run([sys.executable, *program], capture_output=True, text=True,
+                            timeout=60)
+    assert result.returncode == 2 and result.stdout == "", result.stdout
+    prog = "run_all" if program[1].endswith("run_all") else program[1].rsplit(".")[-1] + ".py"
+    assert_one_error_line(result.stderr, prog,
+                          f"ROS_DOMAIN_ID '{domain}' is not a domain: an integer from 0 to 232")
+    assert listing(workdir) == before
+
+
 def test_run_all_hands_the_nodes_checked_values(workdir):
     """A natural YAML list mixing ints and floats, which rcl refuses in a node's parameters,
     reaches the nodes as the floats it was checked as; the params file's values are not
