@@ -8,7 +8,8 @@ Start it beside `python -m clnn_ros.run_all ...` on the same ROS_DOMAIN_ID and n
 the run's --nsv and --max-steps (it builds messages for that network). Start it first: it waits
 for the graph (a participant that joins a running graph is discovered late). Once its
 publishers have matched the graph's subscribers, it sends, on each clock(t) of the graph it
-sees, --per-tick messages on each input topic, until each topic has had --per-topic messages.
+sees, --per-tick messages on each input topic, until each topic has had --per-topic messages;
+then it stays until the episode ends (GRAPH_SILENT_S).
 
 Like the nodes, it uses public rclpy only and never asks who sent a message: it tells the
 graph's clock from its own by content (its own clocks are malformed, or of ticks it remembers
@@ -67,6 +68,11 @@ from fuzz_messages import (FAR, STALE, STALE_FROM, TYPES, WELL_FORMED, MessageMa
 NODE_NAME = "fuzz_graph"
 STARTUP_TIMEOUT_S = 60.0
 ACK_TIMEOUT_S = 10.0
+# After the fuzz it stays until the episode ends (the graph silent this long: gone), so that the
+# trial manager names it: it looks at the ROS graph every 0.5 s and names a publisher only once
+# its node's name has come (rmw sends a participant's node names apart from its endpoints; a
+# fuzzer that left at once, 30 ms after its first message composed, was never named).
+GRAPH_SILENT_S = 30.0
 LOCKSTEP_QOS = qos_profile(qos.LOCKSTEP)
 # The nodes of the graph that subscribe to each input topic (docs/ROS_GRAPH.md).
 SUBSCRIBERS = {CLOCK: ["environment"], TRIAL_EVENT: ["environment", "encoder", "reward", "agent"],
@@ -94,7 +100,7 @@ class Fuzzer(Node):
         self.fuzz_publishers = {topic: self.create_publisher(TYPES[topic], topic, LOCKSTEP_QOS)
                                 for topic in TYPES}
         self.episode_ended = False
-        self.live = None  # the tick of the last clock of the graph seen
+        self.live = self.live_at = None  # the tick of the last clock of the graph seen; when
         self.fuzzed_ticks = []  # the first and the last live tick it sent messages on
         # The ticks of the well-formed clocks and EPISODE_ENDs this fuzzer sent: it hears them
         # too, and tells the graph's by content alone.
@@ -123,7 +129,7 @@ class Fuzzer(Node):
         tick = clock_tick(msg, self.maker.tau_ns)
         if tick in self.own_ticks[CLOCK] or (self.live is not None and tick <= self.live):
             return
-        self.live = tick
+        self.live, self.live_at = tick, time.monotonic()
         if self.armed() and not self.done():
             self.fuzz(tick)
             self.fuzzed_ticks = [(self.fuzzed_ticks or [tick])[0], tick]
@@ -220,6 +226,9 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"fuzz_graph: error: not every message was delivered within "
                       f"{ACK_TIMEOUT_S:.0f} s", file=sys.stderr)
                 return 1
+            while not fuzzer.episode_ended and not signals and \
+                    time.monotonic() - fuzzer.live_at < GRAPH_SILENT_S:
+                executor.spin_once(timeout_sec=0.1)
             text = json.dumps(fuzzer.report(args.seed), indent=1)
             if args.report:
                 with open(args.report, "w") as f:
