@@ -13,6 +13,10 @@ taking turns, so that both see the same machine load.
 the same turns; one thread is the engine's speed per core, 1 and 2 give its scaling from one
 thread to two (default 1,2).
 
+With one thread among --threads, it also measures the physics floor: the core's physics step
+alone, compiled as the engine compiles it, with 1 to 8 cart-poles stepped in turn, and libm's
+sin + cos pair (what a tick costs at least in any engine that equals the core).
+
 An agent-step is one tick: encode, infer, tag, physics step, reward and update. Gymnasium's
 figure is an environment step alone, with a fixed action, as a yardstick for "how fast can a
 Python cart-pole go at all".
@@ -35,6 +39,8 @@ CORE_STEPS = 200_000  # enough for a stable rate of the slow reference
 GYM_STEPS = 200_000
 REPEATS = 3  # best of, for the batch engine's full set
 THREADS = (1, 2)
+FLOOR_STEPS = 20_000_000  # physics steps per floor measurement
+LANES = (1, 2, 4, 8)  # independent cart-poles stepped in turn
 
 
 def compile_seconds() -> float:
@@ -111,6 +117,80 @@ def gymnasium_rate() -> float:
     return GYM_STEPS / (time.perf_counter() - start)
 
 
+def physics_floor() -> tuple[float, dict[int, float]]:
+    """(ns per sin + cos pair of libm, {lanes: ns per physics step}), one thread, best of
+    REPEATS: the core's cartpole_step compiled as the engine compiles it, `lanes` cart-poles
+    stepped in turn, pushed towards their lean, each restarted where it fails (its angle stays
+    within the limit, as in an episode). No agent: what a tick costs at least, in any engine
+    that keeps the core's bits (they pin libm's sin and cos)."""
+    import math
+
+    import numba
+    import numpy as np
+
+    from clnn_ros import batch  # noqa: F401  (registers the core's functions with numba)
+    from clnn_ros.core.params import Params
+    from clnn_ros.core.physics import CONTINUE, cartpole_step, physics_constants
+
+    @numba.njit(error_model="numpy")
+    def sin_cos(n):
+        total = 0.0
+        for i in range(n):
+            angle = 0.1 + i * 1e-9
+            total += math.sin(angle) + math.cos(angle)
+        return total
+
+    @numba.njit(error_model="numpy")
+    def steps(n, constants, lanes):
+        starts = np.linspace(-6.0, 6.0, lanes)  # degrees
+        state = np.zeros((lanes, 4))
+        state[:, 2] = starts
+        for _ in range(n):
+            for j in range(lanes):
+                x, x_dot, theta, theta_dot, status = cartpole_step(
+                    state[j, 0], state[j, 1], state[j, 2], state[j, 3],
+                    10.0 if state[j, 2] > 0 else -10.0, constants)  # about 1,100 steps a trial
+                if status != CONTINUE:
+                    x, x_dot, theta, theta_dot = 0.0, 0.0, starts[j], 0.0
+                state[j, 0], state[j, 1], state[j, 2], state[j, 3] = x, x_dot, theta, theta_dot
+        return state
+
+    def best_ns(run, count: int) -> float:
+        run()  # compiled
+        best = float("inf")
+        for _ in range(REPEATS):
+            start = time.perf_counter()
+            run()
+            best = min(best, time.perf_counter() - start)
+        return best / count * 1e9
+
+    constants = physics_constants(Params())
+    pair = best_ns(lambda: sin_cos(FLOOR_STEPS), FLOOR_STEPS)
+    return pair, {lanes: best_ns(lambda lanes=lanes: steps(FLOOR_STEPS // lanes, constants, lanes),
+                                 FLOOR_STEPS // lanes * lanes) for lanes in LANES}
+
+
+def floor_lines(pair_ns: float, step_ns: dict[int, float], sets: dict, rev: str) -> list[str]:
+    """What the physics alone costs, beside this engine's tick and issue 24's target (2x the
+    engine of `rev` per core, one thread)."""
+    lines = ["The physics floor, same run (one thread, best of "
+             f"{REPEATS}): the core's `cartpole_step` compiled as the engine compiles it, "
+             "several cart-poles stepped in turn (no agent; each restarted where it fails), "
+             f"and libm's sin + cos pair alone: **{pair_ns:.1f} ns** a pair. The core's bits pin "
+             "libm's sin and cos, so no engine that equals the core ticks faster than its "
+             "physics step.", "",
+             "| lanes | ns per physics step |", "|---:|---:|",
+             *[f"| {lanes} | {ns:.1f} |" for lanes, ns in step_ns.items()], ""]
+    if rev:
+        for nsv, best in sets.items():
+            (wall, ticks), (wall_then, _) = best["this", 1], best[rev, 1]
+            lines.append(f"* {nsv} SV, one thread: this engine {wall / ticks * 1e9:.1f} ns a "
+                         f"tick; 2x {rev}'s is {wall_then / ticks / 2 * 1e9:.1f} ns a tick, "
+                         f"against {min(step_ns.values()):.1f} ns for the physics step alone.")
+        lines.append("")
+    return lines
+
+
 def comparison(sets: dict, rev: str, threads: tuple[int, ...]) -> list[str]:
     """The markdown lines that set this engine's full-set times beside those of commit `rev`."""
     lines = [f"This engine and the batch engine of commit `{rev}`, the same full sets in the same "
@@ -171,6 +251,7 @@ def main() -> None:
     (wall_1sv, ticks_1sv), (wall_2sv, ticks_2sv) = sets[1]["this", most], sets[2]["this", most]
     core = core_rate()
     gym = gymnasium_rate()
+    pair_ns, step_ns = physics_floor()
     rows = []
     for n in threads:
         for nsv in (1, 2):
@@ -202,6 +283,7 @@ def main() -> None:
         "",
         *(comparison(sets, args.against, threads) if args.against else []),
         *scaling(sets, list(roots), threads),
+        *(floor_lines(pair_ns, step_ns, sets, args.against) if 1 in threads else []),
     ])
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(text)

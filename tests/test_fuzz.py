@@ -96,8 +96,8 @@ def test_every_fuzz_message_is_refused_and_the_episode_equals_the_core(tmp_path,
     finally:
         graph.kill()
         fuzzer.kill()
-    # The fuzzer leaves as the episode ends: a graph node sending it a message may re-create its port
-    # file as it removes it (Fast DDS 2.14, docs/ROS_GRAPH.md "Leftover files"; seen once in
+    # The fuzzer leaves as the episode ends: a graph node sending it a message may re-create its
+    # port file as it removes it (Fast DDS 2.14, docs/ROS_GRAPH.md "Leftover files"; seen once in
     # three runs of this file); the run removes the ports its nodes wrote to.
     left = unused_fast_dds_files(files_no_other_test_makes(fuzzers_files))
     assert not left, sorted(left)
