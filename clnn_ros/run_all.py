@@ -37,6 +37,7 @@ from .core.checkpoint import Checkpoint, load_checkpoint
 from .core.params import STATE_NAMES, ParamError, Params
 from .core.presets import PRESETS
 from .files import cannot_create
+from .graph.fields import COMPLETED
 from .graph.names import NOT_STARTED, PER_TICK, RECORDER, TRIAL_MANAGER, namespace_problem
 from .graph.run import DEMO, ENVIRONMENTS, OWN_TAU, RUN_SETTINGS, default_bag_path, run_values
 from .graph.ticks import TICKS_RECORD, TickRanges, describe_ranges
@@ -296,7 +297,7 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
         if finished or not bag_path.exists():  # an unfinished one: the error line says so
             print(f"run_all: bag {bag_path}" if finished else
                   "run_all: nothing recorded, no bag", flush=True)
-        if summary.get("exit_reason") == "completed" and finished and \
+        if summary.get("exit_reason") == COMPLETED and finished and \
                 (lacking := bag_lacks(bag_path, summary["ticks"])):
             say(f"run_all: warning: the bag lacks {lacking} (the run's ticks: 0-"
                 f"{summary['ticks'] - 1}, as in trials.csv)")

@@ -24,6 +24,7 @@ import time
 from collections import deque
 from pathlib import Path
 
+from .graph.fields import COMPLETED
 from .graph.names import GRAPH_NODES, RECORDER, TRIAL_MANAGER
 from .graph.run import node_arguments, write_params
 from .process_signals import EXIT_WITH_STDIN, SHOW_STACKS
@@ -273,7 +274,7 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
             # it holds, with the GIL held, so no signal handler runs): nothing is lost by
             # ending it now.
             warn_forced(supervisor.stop([TRIAL_MANAGER], 0.0, interrupt=False))
-            status = 0 if outcome.get("exit_reason") == "completed" else 1
+            status = 0 if outcome.get("exit_reason") == COMPLETED else 1
             break
         time.sleep(0.02)
     if status is None and manager.returncode is not None and manager.returncode < 0:

@@ -118,6 +118,11 @@ def test_silent_node_is_named_after_the_stall_timeout(ros_env, tmp_path):
     assert process.returncode == 1
     assert problem_lines(stderr) == ["run_all: error: stall: node 'environment' went silent at "
                                    "tick 50 (no progress for 1 s)"]
+    # each node downstream says where it stood: at tick 50, without its state
+    for node in ("encoder", "reward", "agent"):
+        assert f"[{node}]: the episode ended (stall: node 'environment' went silent at tick 50 " \
+               f"(no progress for 1 s)) with this node at tick 50, holding none of its inputs" \
+               in stderr, stderr[-3000:]
     assert assert_every_tick(raw_messages(tmp_path / "bag")) == 49
     assert not processes_with(str(tmp_path))
 

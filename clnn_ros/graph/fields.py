@@ -15,6 +15,8 @@ FAILURE_REASONS = ("", "pole_angle", "cart_position")
 REACHED_MAX_STEPS = "max_steps"
 # A trial's end reason by the physics status that ended it (CONTINUE: it reached max_steps).
 END_REASONS = (REACHED_MAX_STEPS, *FAILURE_REASONS[1:])
+# EPISODE_END's end_reason (and summary.json's exit_reason) of an episode that ran to its end.
+COMPLETED = "completed"
 # trials.csv, as the trial manager and analyze write it.
 TRIALS_CSV_HEADER = ("seed", "trial", "initial_angle_deg", "steps", "end_reason")
 

@@ -54,6 +54,10 @@ class TickJoin:
         self.tick = 0
         self.inbox = {}
 
+    def standing(self) -> tuple[int, list[str]]:
+        """(the tick it is at, the topics of that tick it holds)."""
+        return self.tick, list(self.inbox)
+
     def offer(self, topic: str, msg) -> bool:
         """Take `msg` into this tick's inbox; False (refused) if it does not belong there."""
         if msg.tick != self.tick:

@@ -58,7 +58,8 @@ class AgentNode(Node):
             for msg_type, topic in ((SpikeVector, SPIKES), (Reward, REWARD))]
         self.create_subscription(TrialEvent, TRIAL_EVENT, checked(
             TRIAL_EVENT, self.params, self.refusals,
-            ends_with_the_episode(self.finished, self.refusals, lambda: self.join.tick)),
+            ends_with_the_episode(self.finished, self.refusals, self.join.standing,
+                                  self.get_logger().warning)),
             LOCKSTEP_QOS)
         self.create_service(Trigger, SAVE_CHECKPOINT, self.on_save_checkpoint)
         # actions go to the environment and the trial manager, weights to the trial manager

@@ -39,7 +39,8 @@ class EncoderNode(Node):
             LOCKSTEP_QOS)
         self.create_subscription(TrialEvent, TRIAL_EVENT, checked(
             TRIAL_EVENT, self.params, self.refusals,
-            ends_with_the_episode(self.finished, self.refusals, lambda: self.join.tick)),
+            ends_with_the_episode(self.finished, self.refusals, self.join.standing,
+                                  self.get_logger().warning)),
             LOCKSTEP_QOS)
         # spikes go to the agent and the trial manager
         self.readiness = Readiness(self, endpoints_matched(

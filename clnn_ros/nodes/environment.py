@@ -83,8 +83,9 @@ class EnvironmentNode(Node):
                                            LOCKSTEP_QOS)
                   for msg_type, topic, callback in ((Clock, CLOCK, self.on_clock),
                                                     (Action, ACTION, self.on_action))]
-        self.ends_with_the_episode = ends_with_the_episode(self.finished, self.refusals,
-                                                           lambda: self.tick)
+        self.ends_with_the_episode = ends_with_the_episode(
+            self.finished, self.refusals, lambda: (self.tick, list(self.pending)),
+            self.get_logger().warning)
         self.create_subscription(TrialEvent, TRIAL_EVENT, checked(
             TRIAL_EVENT, self.params, self.refusals, self.on_trial_event), LOCKSTEP_QOS)
         # states go to the encoder, the reward node and the trial manager

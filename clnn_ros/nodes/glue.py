@@ -21,7 +21,7 @@ from std_msgs.msg import String
 from ..core.params import ParamError, Params
 from ..graph import qos
 from ..graph.content import RULES
-from ..graph.fields import EPISODE_END
+from ..graph.fields import COMPLETED, EPISODE_END
 from ..graph.lockstep import Refusals, episode_end_problem
 from ..graph.names import READY, SIM_TIME_NODES, TRIAL_EVENT
 from ..graph.run import (DESCRIPTIONS, declared_values, node_parameters, read_params_file,
@@ -101,15 +101,23 @@ def checked(topic: str, params: Params, refusals: Refusals, callback: Callable):
 
 
 def ends_with_the_episode(finished: Future, refusals: Refusals,
-                          current_tick: Callable[[], int]) -> Callable:
+                          standing: Callable[[], tuple[int, list[str]]],
+                          log: Callable[[str], None]) -> Callable:
     """A trial/event callback that finishes the node (exit status 0) on this graph's
-    EPISODE_END; one of another tick is refused (graph.lockstep.episode_end_problem)."""
+    EPISODE_END; one of another tick is refused (graph.lockstep.episode_end_problem).
+    `standing()`: (the node's tick, the inputs of it that it holds). An episode ended for any
+    reason but "completed" has the node `log` where it stood: a stall names the node whose
+    message is missing in the trial manager, and the others' lines show who did get what."""
     def on_event(event) -> None:
         if event.event != EPISODE_END:
             return
-        if problem := episode_end_problem(event.tick, current_tick()):
+        tick, held = standing()
+        if problem := episode_end_problem(event.tick, tick):
             refusals.refuse(TRIAL_EVENT, event, problem)
         elif not finished.done():
+            if event.end_reason != COMPLETED:
+                log(f"the episode ended ({event.end_reason}) with this node at tick {tick}, "
+                    f"holding {', '.join(held) or 'none of its inputs'}")
             finished.set_result(0)
     return on_event
 

@@ -42,7 +42,8 @@ class RewardNode(Node):
             LOCKSTEP_QOS)
         self.create_subscription(TrialEvent, TRIAL_EVENT, checked(
             TRIAL_EVENT, self.params, self.refusals,
-            ends_with_the_episode(self.finished, self.refusals, lambda: self.join.tick)),
+            ends_with_the_episode(self.finished, self.refusals, self.join.standing,
+                                  self.get_logger().warning)),
             LOCKSTEP_QOS)
         # rewards go to the agent and the trial manager
         self.readiness = Readiness(self, endpoints_matched(

@@ -43,7 +43,7 @@ from std_msgs.msg import String, UInt64
 
 from ..core.episode import seed_setup
 from ..files import describe_write_error, write_atomically, write_text_atomically
-from ..graph.fields import END_REASONS, tick_nanoseconds, tick_stamp, trials_csv
+from ..graph.fields import COMPLETED, END_REASONS, tick_nanoseconds, tick_stamp, trials_csv
 from ..graph.lockstep import Refusals, RunningTime, TickJoin
 from ..graph.names import (ACTION, CLOCK, GRAPH_NODES, NOT_STARTED, PUBLISHED_BY, READY,
                            RECORDED, RECORDER, REWARD, SPIKES, STATE, TRIAL_EVENT, TRIAL_MANAGER,
@@ -175,7 +175,7 @@ class TrialManagerNode(Node):
             if self.tainted:  # never reported as completed
                 self.stop(1, f"tainted: {self.tainted}", self.last_trial_tick)
             else:
-                self.stop(0, "completed", self.last_trial_tick)
+                self.stop(0, COMPLETED, self.last_trial_tick)
 
     # --- the watchdog -------------------------------------------------------------------------
 
