@@ -23,6 +23,7 @@ import threading
 import time
 from collections import deque
 from pathlib import Path
+from typing import Callable
 
 from .graph.fields import COMPLETED
 from .graph.names import GRAPH_NODES, RECORDER, TRIAL_MANAGER
@@ -47,6 +48,29 @@ STACKS_S = 0.5  # for a child's stacks (SHOW_STACKS) to reach its stderr
 SAMPLE_S = 0.5  # how often the children's shared-memory files are noted
 # "<prog>: error: <message>" (the project's one-line errors) or a ROS log line at ERROR.
 OWN_ERROR = re.compile(r"^(?:\S+: error: |\[ERROR\] \[[\d.]+\] \[[^\]]+\]: )(.*)$")
+
+
+def waited_for_cpu_s(pid: int) -> float:
+    """Seconds the main thread of process `pid` has been ready to run but waiting for a CPU
+    (/proc/PID/schedstat; 0 where it cannot be read)."""
+    try:
+        with open(f"/proc/{pid}/schedstat") as schedstat:
+            return int(schedstat.read().split()[1]) / 1e9
+    except (OSError, ValueError, IndexError):
+        return 0.0
+
+
+class Grace:
+    """The time a child has had since this began: the wall time less what its main thread
+    spent waiting for a CPU. A child starved on a loaded machine is slow, not hung: a
+    suite beside CPU hogs saw a trial manager take over SHUTDOWN_GRACE_S of wall time to exit
+    after its results were written (run fh1), with none of that time its own."""
+
+    def __init__(self, pid: int):
+        self.pid, self.began, self.waited = pid, time.monotonic(), waited_for_cpu_s(pid)
+
+    def elapsed(self) -> float:
+        return time.monotonic() - self.began - (waited_for_cpu_s(self.pid) - self.waited)
 
 
 def say(line: str) -> None:
@@ -110,6 +134,13 @@ class Child:
             return True
         except subprocess.TimeoutExpired:
             return False
+
+    def wait_while(self, allowed: Callable[[], bool]) -> bool:
+        """Whether it ended while `allowed()` held (looked at every 0.1 s)."""
+        while allowed():
+            if self.wait(0.1):
+                return True
+        return self.wait(0.0)
 
     def close(self) -> None:
         self._reader.join(timeout=1.0)
@@ -199,10 +230,10 @@ class Supervisor:
         if interrupt:
             for child in chosen:
                 child.signal(signal.SIGTERM)
-        deadline = time.monotonic() + grace_s
+        graces = [Grace(child.process.pid) for child in chosen]
         forced = []
-        for child in chosen:
-            if child.wait(deadline - time.monotonic()):
+        for child, grace in zip(chosen, graces):
+            if child.wait(0.0) or child.wait_while(lambda: grace.elapsed() < grace_s):
                 continue
             if child.shows_stacks:  # where it hangs, in the run's log
                 say(f"run_all: node {child.name} is slow to exit; the stacks of its threads:")
@@ -254,21 +285,21 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
                              shows_stacks=command[:2] == [sys.executable, "-m"] and
                              command[2].startswith("clnn_ros."))
     manager = supervisor.children[TRIAL_MANAGER]
-    failure, ended_at, outcome, status, quit_at = None, None, None, None, None
+    failure, ended, outcome, status, quit_at = None, None, None, None, None
     while manager.returncode is None and not interrupted:
         if failure := supervisor.first_failure(exclude={TRIAL_MANAGER}):
             break
-        if ended_at is None and (outcome := fresh_summary(Path(values["out_dir"]), began)):
-            ended_at = time.monotonic()  # the episode is over and its results written
+        if ended is None and (outcome := fresh_summary(Path(values["out_dir"]), began)):
+            ended = Grace(manager.process.pid)  # the episode is over and its results written
         # A node ends with status 0 after the episode's end, or when someone else stopped it
         # (SIGINT, SIGTERM): then the trial manager, which has not ended, never will.
         quitter = next((c for name, c in supervisor.children.items()
                         if name in NODES and c.returncode == 0), None)
-        quit_at = (quit_at or time.monotonic()) if quitter and ended_at is None else None
+        quit_at = (quit_at or time.monotonic()) if quitter and ended is None else None
         if quit_at is not None and time.monotonic() - quit_at > SHUTDOWN_GRACE_S:
             failure = quitter
             break
-        if ended_at is not None and time.monotonic() - ended_at > SHUTDOWN_GRACE_S:
+        if ended is not None and ended.elapsed() > SHUTDOWN_GRACE_S:
             # Its DDS participant hangs in deletion (seen once: Fast DDS 2.14's
             # DomainParticipant::set_listener spins while a discovery callback waits for a lock
             # it holds, with the GIL held, so no signal handler runs): nothing is lost by

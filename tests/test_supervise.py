@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import os
+import subprocess
 import sys
 import time
 
-from clnn_ros.supervise import Supervisor
+from clnn_ros.supervise import Grace, Supervisor
 
 IGNORES_SIGTERM = ("import signal, sys, time; signal.signal(signal.SIGTERM, signal.SIG_IGN); "
                    "print('ready', file=sys.stderr, flush=True); time.sleep(60)")
@@ -72,3 +73,27 @@ def test_a_child_told_to_stop_while_still_importing_ends_without_a_traceback():
         assert child.returncode == -15 and child.last_lines() == ["ready"]
     finally:
         supervisor.close()
+
+
+def test_a_childs_grace_does_not_count_the_time_it_waited_for_a_cpu():
+    """Slow is not hung: a child that shares one CPU with two busy processes runs a third of
+    the time, and its grace (supervise.Grace) counts little of the wall time; a sleeping
+    child's counts all of it."""
+    busy = "while True: pass"
+    one_cpu = min(os.sched_getaffinity(0))
+    processes = [subprocess.Popen([sys.executable, "-c", code], stderr=subprocess.PIPE)
+                 for code in (busy, busy, busy, SLEEPS)]
+    try:
+        for process in processes[:3]:
+            os.sched_setaffinity(process.pid, {one_cpu})
+        assert processes[3].stderr.readline() == b"ready\n"  # started: now it only sleeps
+        starved, sleeping = Grace(processes[0].pid), Grace(processes[3].pid)
+        began = time.monotonic()
+        time.sleep(2.0)
+        wall = time.monotonic() - began
+        assert starved.elapsed() < 0.7 * wall, (starved.elapsed(), wall)
+        assert sleeping.elapsed() > 0.9 * wall, (sleeping.elapsed(), wall)
+    finally:
+        for process in processes:
+            process.kill()
+            process.wait()
