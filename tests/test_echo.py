@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -14,6 +15,7 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Byte, Empty, UInt8MultiArray
 
 from clnn_ros.echo import to_csv, to_yaml
+from clnn_ros.process_signals import SHOW_STACKS
 from clnn_ros_msgs.msg import CartPoleState, InputLabels, Reward, SpikeVector, TrialEvent
 
 from test_graph import wait_for_line
@@ -98,9 +100,22 @@ def stop(probes) -> None:
             probe.wait()
 
 
-def tool(env, module, *args):
-    return subprocess.run([sys.executable, "-m", module, *args], env=env, capture_output=True,
-                          text=True, timeout=120)  # a bound against a hang
+def tool(env, module, *args) -> subprocess.CompletedProcess:
+    """A tool's run, with a bound against a hang; a hung tool shows the stack of each of its
+    threads (process_signals.SHOW_STACKS; seen once, in fa5: echo --once printed nothing,
+    not even its error after --wait 60)."""
+    process = subprocess.Popen([sys.executable, "-m", module, *args], env=env,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        stdout, stderr = process.communicate(timeout=120)
+    except subprocess.TimeoutExpired:
+        process.send_signal(SHOW_STACKS)
+        time.sleep(1.0)  # for the stacks to be written
+        process.kill()
+        stdout, stderr = process.communicate()
+        raise AssertionError(f"{module} {' '.join(args)} hung; stdout {stdout!r}; stderr "
+                             f"with its threads' stacks:\n{stderr}") from None
+    return subprocess.CompletedProcess(process.args, process.returncode, stdout, stderr)
 
 
 def echo_once(env, topic, *options) -> str:
