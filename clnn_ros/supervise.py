@@ -233,7 +233,7 @@ class Supervisor:
         graces = [Grace(child.process.pid) for child in chosen]
         forced = []
         for child, grace in zip(chosen, graces):
-            if child.wait(0.0) or child.wait_while(lambda: grace.elapsed() < grace_s):
+            if child.wait_while(lambda: grace.elapsed() < grace_s):
                 continue
             if child.shows_stacks:  # where it hangs, in the run's log
                 say(f"run_all: node {child.name} is slow to exit; the stacks of its threads:")
