@@ -323,7 +323,8 @@ def test_echo_topics_then_ctrl_c_leaves_a_complete_bag(ros_env, tmp_path):
              } | {"/parameter_events [rcl_interfaces/msg/ParameterEvent]",
                   "/rosout [rcl_interfaces/msg/Log]"}
     assert listed_topics(ros_env, graph) == graph
-    plumbing = {"/_graph/ready [std_msgs/msg/String]", "/_recorder/progress [std_msgs/msg/UInt64]"}
+    plumbing = {"/_graph/ready [std_msgs/msg/String]", "/_graph/claim [std_msgs/msg/String]",
+                "/_recorder/progress [std_msgs/msg/UInt64]"}
     assert listed_topics(ros_env, graph | plumbing, "--include-hidden-topics") == graph | plumbing
     state = tool(ros_env, "clnn_ros.echo", names.absolute(STATE), "--once")
     assert state.returncode == 0 and state.stdout.endswith("\n---\n")

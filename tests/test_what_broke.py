@@ -25,7 +25,7 @@ from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
 from clnn_ros.graph.names import PER_TICK, STATE
 from clnn_ros.graph.ticks import TICKS_RECORD, TickRanges
-from clnn_ros.nodes.trial_manager import DISCOVERY_S
+from clnn_ros.graph.watch import claim_order, graph_claim
 
 from test_graph import processes_with, wait_for_line
 from test_recording import child
@@ -177,10 +177,8 @@ def test_a_second_node_of_a_graph_name_mid_run_is_named(ros_env, tmp_path):
          "--max-steps", str(MAX_STEPS), "--out", str(tmp_path), "--no-record"],
         env={**ros_env, "CLNN_TEST_RUN": str(tmp_path)}, stdout=subprocess.PIPE,
         stderr=subprocess.PIPE, text=True, start_new_session=True)
+    # Once the graph runs, an intruder is named, not taken for a graph to abandon.
     wait_for_line(process.stdout, "trial    1/")
-    # Past the window in which a second graph is looked for (it counts from the first tick,
-    # before trial 1 ended): an intruder then is named, not taken for a graph to abandon.
-    time.sleep(DISCOVERY_S)
     intruder = subprocess.Popen([sys.executable, "-m", "clnn_ros.nodes.agent", "--ros-args",
                                  "-p", f"seed:={SEED}"], env=ros_env, stderr=subprocess.DEVNULL)
     try:
@@ -192,6 +190,65 @@ def test_a_second_node_of_a_graph_name_mid_run_is_named(ros_env, tmp_path):
         process.communicate(timeout=HANG_S)
     assert re.search(r"\[trial_manager\]: a second node named 'agent' joined namespace / at "
                      r"tick \d+$", line.rstrip()), line
+    assert not processes_with(str(tmp_path))
+
+
+CLAIMER = """
+import sys, rclpy
+from std_msgs.msg import String
+from clnn_ros.nodes.glue import CLAIM_QOS, NodeProcess
+from clnn_ros.graph.names import CLAIM
+# another graph's trial manager, as far as its claim goes: published once, kept until SIGINT
+with NodeProcess(sys.argv) as process:
+    node = rclpy.create_node("claimer")
+    node.create_publisher(String, CLAIM, CLAIM_QOS).publish(String(data=sys.argv[1]))
+    while not process.signals:
+        rclpy.spin_once(node, timeout_sec=0.1)
+    process.destroy(node)
+"""
+
+
+def claimer(env, claim: str) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-c", CLAIMER, claim], env=env,
+                            stderr=subprocess.DEVNULL)
+
+
+def test_claims_order_two_graphs_alike_on_both_sides():
+    first, later = graph_claim(1000, "ffff"), graph_claim(1001, "0000")
+    assert claim_order(first) < claim_order(later)
+    assert claim_order(graph_claim(1000, "0000")) < claim_order(first)  # a tie: the tokens
+    assert claim_order("soon ffff") is None and claim_order("1000") is None
+    assert claim_order("-1 x") is None and claim_order("١٠ x") is None
+
+
+def test_of_two_graphs_the_later_gives_way_however_late_they_meet(ros_env, tmp_path):
+    """No second graph's nodes in sight, only claims (graph.watch.graph_claim), long after the
+    start: a claim from a graph that started later is named and the run goes on; one from a
+    graph that started earlier abandons the run (exit 1; its bag, mixed, is removed)."""
+    process = start(ros_env, tmp_path, trials=400)
+    claimers = []
+    try:
+        wait_for_line(process.stdout, "trial    2/")
+        claimers.append(claimer(ros_env, graph_claim(time.time_ns(), "later")))
+        line = wait_for_line(process.stderr, "a second graph started", timeout=HANG_S)
+        assert re.search(r"\[trial_manager\]: a second graph started in namespace / at tick "
+                         r"\d+: it gives way$", line.rstrip()), line
+        assert process.poll() is None
+        claimers.append(claimer(ros_env, graph_claim(1, "earlier")))
+        _, stderr = process.communicate(timeout=HANG_S)
+    finally:
+        for other in claimers:
+            other.send_signal(signal.SIGINT)
+            other.communicate(timeout=60)
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGINT)
+            process.communicate(timeout=HANG_S)
+    assert process.returncode == 1, stderr[-3000:]
+    domain = ros_env["ROS_DOMAIN_ID"]
+    assert problem_lines(stderr) == [
+        f"run_all: error: another graph runs in namespace / on ROS domain {domain}: its trial "
+        f"manager started first (give each graph its own --namespace or ROS_DOMAIN_ID)"], stderr
+    assert not (tmp_path / "bag").exists()
     assert not processes_with(str(tmp_path))
 
 

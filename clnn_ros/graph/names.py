@@ -31,8 +31,10 @@ PER_TICK = (CLOCK, STATE, SPIKES, REWARD, ACTION)  # one message per tick
 # Topics an environment of one's own may leave out (docs/ENV_CONTRACT.md): only viewers read them.
 OPTIONAL = (MARKERS,)
 
-# Plumbing (hidden): readiness announcements, the recorder's progress.
+# Plumbing (hidden): readiness announcements, the trial managers' claims (graph.watch.graph_claim),
+# the recorder's progress.
 READY = "_graph/ready"
+CLAIM = "_graph/claim"
 RECORDED = "_recorder/progress"
 # The agent's service (private: /<namespace>/agent/save_checkpoint), std_srvs/Trigger.
 SAVE_CHECKPOINT = "~/save_checkpoint"

@@ -28,6 +28,9 @@ PROGRESS = Qos(depth=1)
 # A readiness announcement must reach a trial manager that starts later than the node; the
 # depth keeps every node's announcement when several arrive at once.
 READY = Qos(depth=16, durability="transient_local")
+# A trial manager's claim: published once, kept for the trial manager of a graph that starts
+# later.
+CLAIM = Qos(depth=1, durability="transient_local")
 # The input labels: published once, kept for whoever subscribes later (echo --raster).
 LABELS = Qos(depth=1, durability="transient_local")
 # The recorder's subscriptions: deep enough that the DDS receive thread never drops a message

@@ -7,6 +7,7 @@ death."""
 
 from __future__ import annotations
 
+import os
 from collections import Counter
 
 from .names import PUBLISHED_BY
@@ -41,3 +42,24 @@ def foreign_publishers(publishers: dict[str, list[tuple[str, str]]],
 def describe_foreign(found: tuple[str, str, str]) -> str:
     topic, node, namespace = found
     return f"a foreign publisher on {topic}: node '{node}' in namespace {namespace}"
+
+
+def graph_claim(started_ns: int, token: str) -> str:
+    """A trial manager's claim to its namespace (graph.names.CLAIM): when it started (ns since
+    the epoch) and a random token that tells apart two that started in the same nanosecond."""
+    return f"{started_ns} {token}"
+
+
+def claim_order(claim: str) -> tuple[int, str] | None:
+    """A claim as it orders: the earlier start first. Both trial managers of two graphs order
+    their two claims alike (on two hosts a clock's skew may change which counts as first, never
+    that exactly one is). None for a text that is no claim."""
+    started, _, token = claim.partition(" ")
+    return (int(started), token) if started.isdigit() and started.isascii() and token else None
+
+
+def another_graph(namespace: str, seen: str) -> str:
+    """Why a graph gives way to another of the same names in its namespace and domain."""
+    domain = os.environ.get("ROS_DOMAIN_ID", "") or "0"
+    return (f"another graph runs in namespace {namespace} on ROS domain {domain}: {seen} (give "
+            f"each graph its own --namespace or ROS_DOMAIN_ID)")

@@ -5,6 +5,7 @@ the run's description, the content check of an input, readiness, and main(). The
 from __future__ import annotations
 
 import os
+import secrets
 import sys
 import time
 from typing import Callable
@@ -23,15 +24,17 @@ from ..graph import qos
 from ..graph.content import RULES
 from ..graph.fields import COMPLETED, EPISODE_END
 from ..graph.lockstep import Refusals, episode_end_problem
-from ..graph.names import READY, SIM_TIME_NODES, TRIAL_EVENT
+from ..graph.names import CLAIM, READY, SIM_TIME_NODES, TRIAL_EVENT
 from ..graph.run import (DESCRIPTIONS, declared_values, node_parameters, read_params_file,
                          names_list)
+from ..graph.watch import claim_order, graph_claim
 from ..rclpy_session import qos_profile, ros_session, spin_until_finished, split_ros_arguments
 from ..rosenv import (SHM_CLEANED_BY_SUPERVISOR, remove_unused_fast_dds_files,
                       written_fast_dds_files)
 
 LOCKSTEP_QOS = qos_profile(qos.LOCKSTEP)
 READY_QOS = qos_profile(qos.READY)
+CLAIM_QOS = qos_profile(qos.CLAIM)
 PROGRESS_QOS = qos_profile(qos.PROGRESS)
 LABELS_QOS = qos_profile(qos.LABELS)
 ACK_WAIT_S = 2.0  # a node's last messages reach the recorder before the node exits (or this)
@@ -160,6 +163,30 @@ class Readiness:
         if now - self._announced_at >= qos.READY_REPEAT_S and self.is_ready():
             self._publisher.publish(String(data=self.name))
             self._announced_at = now
+
+
+class GraphClaim:
+    """Which of two graphs of the same names in one namespace and domain started first. Each
+    trial manager publishes its claim (graph.watch.graph_claim) on CLAIM, kept for one that starts
+    later, and reads the others': `on_other(started_first)` once per other graph. Both order two
+    claims alike, so exactly one of the two gives way however late discovery lets them meet (in
+    CI a second graph saw the first one's node names only seconds after its own first tick)."""
+
+    def __init__(self, node: Node, on_other: Callable[[bool], None]):
+        self.claim = graph_claim(time.time_ns(), secrets.token_hex(8))
+        self.on_other, self._others, self._log = on_other, set(), node.get_logger()
+        self._publisher = node.create_publisher(String, CLAIM, CLAIM_QOS)
+        self._publisher.publish(String(data=self.claim))
+        node.create_subscription(String, CLAIM, self._receive, CLAIM_QOS)
+
+    def _receive(self, msg: String) -> None:
+        if msg.data == self.claim or msg.data in self._others:
+            return
+        if (other := claim_order(msg.data)) is None:
+            self._log.error(f"refused {CLAIM}: {msg.data[:80]!r} is no claim")
+            return
+        self._others.add(msg.data)
+        self.on_other(other < claim_order(self.claim))
 
 
 def deliver_published(node: Node) -> None:

@@ -14,10 +14,10 @@ What ends an episode early, with exit status 1 and the node to blame:
   message for the tick is missing;
 * a node of `external_nodes` that leaves the ROS graph (the nodes run_all or launch started
   are theirs to watch: they see the process exit; a paused one that drops out is alive);
-* another graph of the same node names in the same namespace and domain, seen before the first
-  tick or within DISCOVERY_S of it (exit status NOT_STARTED: the run is
-  abandoned; later, a warning names it); a node of `external_nodes` that does not appear within
-  `stall_timeout_s` once the rest is up (the others are waited for as long as they take);
+* another graph of the same names in the namespace and domain that started first (GraphClaim;
+  or its nodes, seen before the first tick): exit status NOT_STARTED, the run is abandoned; a
+  node of `external_nodes` that does not appear within `stall_timeout_s` once the rest is up
+  (the others are waited for as long as they take);
 * a foreign publisher on a graph topic (graph.watch), unless allow_foreign_publishers: then
   the run goes on and ends "tainted", exit status 1, never "completed".
 With a recorder it keeps the clock at most RECORDER_WINDOW ticks ahead of the recorder's
@@ -29,7 +29,6 @@ file) and at the end (final_weights.npy, summary.json).
 from __future__ import annotations
 
 import json
-import os
 import time
 from collections import Counter
 from pathlib import Path
@@ -50,19 +49,14 @@ from ..graph.names import (ACTION, CLOCK, GRAPH_NODES, NOT_STARTED, PUBLISHED_BY
                            WEIGHTS)
 from ..graph.qos import RECORDER_WINDOW
 from ..graph.run import NODE_PARAMETERS, names_list
-from ..graph.watch import describe_foreign, foreign_publishers, gone, named_twice
+from ..graph.watch import another_graph, describe_foreign, foreign_publishers, gone, named_twice
 from ..init_weights import episode_start
-from .glue import (LOCKSTEP_QOS, PROGRESS_QOS, READY_QOS, Readiness, checked,
+from .glue import (LOCKSTEP_QOS, PROGRESS_QOS, READY_QOS, GraphClaim, Readiness, checked,
                    declare_run_parameters, endpoints_matched, run_node, steady_clock,
                    use_sim_time)
 
 WATCHDOG_S = 0.1
 GRAPH_CHECK_S = 0.5  # how often the ROS graph is looked at for nodes that left it
-# For this long after the first tick, the trial manager looks for another graph of the same names
-# in its namespace (a new participant sees a running one after 0.1-2.8 s here); the episode runs
-# meanwhile, and is abandoned if one turns up. Counted from the first tick, not from its own
-# start: on a loaded machine the nodes may take longer than this to come up (run fb7).
-DISCOVERY_S = 3.0
 WAITING_NOTE_S = 10.0  # while the graph is not ready, a note of what it waits for this often
 # Who publishes what within a tick, in causal order: the first one missing went silent.
 CHAIN = (STATE, SPIKES, REWARD, ACTION)
@@ -118,6 +112,7 @@ class TrialManagerNode(Node):
         self.create_subscription(String, READY, self.on_ready, READY_QOS)
         # announced like every node's (a tool watching the graph start sees who is up)
         self.readiness = Readiness(self, self.matched, is_running=lambda: self.join.tick > 0)
+        self.claim = GraphClaim(self, self.on_other_graph)
         self.recorded_tick = -1
         self.held = None  # (tick, starts a trial): the next tick, waiting for the recorder
         self.follows_recorder = RECORDER in self.extra_nodes
@@ -203,14 +198,11 @@ class TrialManagerNode(Node):
         present = Counter(name for name, ns in self.get_node_names_and_namespaces()
                           if ns == namespace)
         if twice := named_twice(present, self.expected | {TRIAL_MANAGER}):
-            if self.started_at is None or time.monotonic() - self.started_at < DISCOVERY_S:
+            if self.started_at is None:
                 self.not_started = True
-                return (f"another graph runs in namespace {namespace} on ROS domain "
-                        f"{os.environ.get('ROS_DOMAIN_ID', '0') or '0'}: two nodes named "
-                        f"{', '.join(twice)} (give each graph its own --namespace or "
-                        f"ROS_DOMAIN_ID)")
-            # A graph that starts beside this one abandons itself (above, in its own trial
-            # manager): this one goes on, and says what it saw.
+                return another_graph(namespace, f"two nodes named {', '.join(twice)}")
+            # A graph that starts beside this one abandons itself (on_other_graph, in its own
+            # trial manager): this one goes on, and says what it saw.
             for name in sorted(set(twice) - self.named_twice):
                 self.get_logger().warning(f"a second node named '{name}' joined namespace "
                                           f"{namespace} at tick {self.join.tick}")
@@ -231,6 +223,15 @@ class TrialManagerNode(Node):
                        f"taken for the graph's; allow_foreign_publishers: go on, tainted)"
             self.get_logger().warning(f"{self.tainted}: the run goes on, its results tainted")
         return None
+
+    def on_other_graph(self, started_first: bool) -> None:
+        """The claim of another graph's trial manager in this namespace and domain."""
+        namespace = self.get_namespace()
+        if started_first:
+            self.stop(NOT_STARTED, another_graph(namespace, "its trial manager started first"))
+        else:
+            self.get_logger().warning(f"a second graph started in namespace {namespace} at tick "
+                                      f"{self.join.tick}: it gives way")
 
     def watch_recorder(self, present: bool) -> None:
         """Paused beyond its DDS lease, the recorder drops out of the ROS graph: what the graph
