@@ -65,6 +65,27 @@ def _open_shm_files(pid: int | str) -> set[str]:
     return names
 
 
+def removed_listening_ports(pid: int | str) -> list[str]:
+    """The shared-memory ports process `pid` listens on (a Fast DDS thread dds.shm.<port> each)
+    whose files were removed under it: another participant judged the port unhealthy and made
+    it anew (SharedMemGlobal.hpp, open_port), and what is sent there never reaches `pid`. Empty
+    if none, or if the process is gone or not ours to read."""
+    try:
+        tasks = os.listdir(f"/proc/{pid}/task")
+        listened = set()
+        for task in tasks:
+            with open(f"/proc/{pid}/task/{task}/comm") as comm:
+                thread = comm.read().strip()
+            if thread.startswith("dds.shm.") and thread[8:].isdigit():
+                listened.add(f"fastrtps_port{thread[8:]}")
+        with open(f"/proc/{pid}/maps") as maps:
+            removed = {Path(line.split()[5]).name for line in maps
+                       if line.rstrip().endswith(" (deleted)") and len(line.split()) > 5}
+    except OSError:
+        return []  # the process (or a thread) ended, or is not ours to read
+    return sorted(listened & removed)
+
+
 def own_fast_dds_files(pid: int | str) -> set[str]:
     """The Fast DDS files that belong to process `pid`: its segment and the ports it listens on,
     each known by the lock file it holds open (`<name>_el`, `<name>_sl`), with the port's

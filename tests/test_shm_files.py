@@ -11,7 +11,7 @@ import sys
 import pytest
 
 from clnn_ros.rosenv import (SETTLE_S, SHM, own_fast_dds_files, remove_unused_fast_dds_files,
-                             shm_files_in_use, shm_files_of)
+                             removed_listening_ports, shm_files_in_use, shm_files_of)
 
 READS = 1000
 # Holds a Fast DDS lock file open and opens and closes 20 other files at a time, without end.
@@ -104,3 +104,40 @@ def test_a_file_of_the_same_name_in_another_dev_shm_does_not_keep_this_one(tmp_p
         other.wait()
         if os.path.exists(path):  # a failed assertion leaves no file behind
             os.unlink(path)
+
+
+# A listener as Fast DDS runs one: a thread named dds.shm.<port> with the port's file mapped.
+LISTENER = """
+import ctypes, mmap, sys
+ctypes.CDLL(None).prctl(15, sys.argv[2].encode(), 0, 0, 0)  # PR_SET_NAME: this thread's name
+with open(sys.argv[1], "r+b") as f:
+    port = mmap.mmap(f.fileno(), 4096)
+print("listening", flush=True)
+sys.stdin.read()
+"""
+
+
+def test_a_listening_port_whose_file_was_removed_is_named(tmp_path):
+    """rosenv.removed_listening_ports: a port file removed under its listener (Fast DDS made it
+    anew: the listener hears nothing sent there) is named; one still there, or a removed file
+    the process maps but does not listen on (a port it sends to), is not."""
+    listened, sent_to = tmp_path / "fastrtps_port64999", tmp_path / "fastrtps_port64998"
+    for path in (listened, sent_to):
+        path.write_bytes(bytes(4096))
+    listener = subprocess.Popen([sys.executable, "-c", LISTENER, str(listened),
+                                 "dds.shm.64999"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                text=True)
+    sender = subprocess.Popen([sys.executable, "-c", LISTENER, str(sent_to), "dds.shm.1"],
+                              stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        for process in (listener, sender):
+            assert process.stdout.readline() == "listening\n"
+        assert removed_listening_ports(listener.pid) == []
+        listened.unlink()
+        sent_to.unlink()
+        assert removed_listening_ports(listener.pid) == ["fastrtps_port64999"]
+        assert removed_listening_ports(sender.pid) == []
+    finally:
+        for process in (listener, sender):
+            process.communicate(timeout=30)
+    assert removed_listening_ports(listener.pid) == []  # gone: nothing to say
