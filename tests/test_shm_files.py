@@ -141,3 +141,24 @@ def test_a_listening_port_whose_file_was_removed_is_named(tmp_path):
         for process in (listener, sender):
             process.communicate(timeout=30)
     assert removed_listening_ports(listener.pid) == []  # gone: nothing to say
+
+
+def test_a_deaf_node_says_so_of_itself(tmp_path):
+    """glue.deafness, the trial manager's addition to a stall: its own port removed under it."""
+    port = tmp_path / "fastrtps_port64997"
+    port.write_bytes(bytes(4096))
+    deaf = """
+import ctypes, mmap, os, sys
+from clnn_ros.nodes.glue import deafness
+ctypes.CDLL(None).prctl(15, b"dds.shm.64997", 0, 0, 0)
+with open(sys.argv[1], "r+b") as f:
+    port = mmap.mmap(f.fileno(), 4096)
+print(repr(deafness()))
+os.unlink(sys.argv[1])
+print(deafness())
+"""
+    said = subprocess.run([sys.executable, "-c", deaf, str(port)], capture_output=True,
+                          text=True, timeout=60)
+    assert said.stdout.splitlines() == [
+        "''", "; this node listens on shared-memory ports whose files were removed under it "
+              "(fastrtps_port64997): it heard nothing sent there"], said.stderr
