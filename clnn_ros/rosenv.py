@@ -161,7 +161,13 @@ def unused_fast_dds_files(names: set[str] | None = None) -> set[str]:
     """The Fast DDS files (all, or those of `names` that exist) that no process uses: what
     killed processes left behind."""
     candidates = fast_dds_shm_files() if names is None else names & fast_dds_shm_files()
-    return candidates - shm_files_in_use()
+    in_use = shm_files_in_use()
+    # A port's mutex (sem.<port>_mutex) is open only while a process opens the port, not while
+    # it listens or sends: it stays while its port is used. Removed, the next opener makes a
+    # new one, and two processes that open or rebuild the port at once are no longer kept apart.
+    return {name for name in candidates - in_use
+            if not (name.startswith("sem.") and name.endswith("_mutex")
+                    and name[4:-6] in in_use)}
 
 
 # A Fast DDS file is created, then mapped by its creator a moment later, and a new participant of

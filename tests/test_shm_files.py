@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -162,3 +163,27 @@ print(deafness())
     assert said.stdout.splitlines() == [
         "''", "; this node listens on shared-memory ports whose files were removed under it "
               "(fastrtps_port64997): it heard nothing sent there"], said.stderr
+
+
+def test_the_mutex_of_a_port_in_use_is_kept(tmp_path):
+    """A port's mutex is open only while a process opens the port: it is not removed as unused
+    while the port itself is used (a node's cleanup on its way out removed the mutexes of its
+    live peers' ports), and it is once the port is not."""
+    port = f"fastrtps_clnn_test_{os.getpid()}_{tmp_path.name}"
+    mutex = f"sem.{port}_mutex"
+    for name in (port, mutex):
+        with open(os.path.join(SHM, name), "wb") as f:
+            f.write(bytes(4096))
+    listener = subprocess.Popen([sys.executable, "-c", LISTENER, os.path.join(SHM, port),
+                                 "clnn_test"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                text=True)
+    try:
+        assert listener.stdout.readline() == "listening\n"
+        time.sleep(SETTLE_S)  # both settled: only their use decides
+        assert remove_unused_fast_dds_files({port, mutex}) == []
+        assert os.path.exists(os.path.join(SHM, mutex))
+    finally:
+        listener.communicate(timeout=30)
+    assert remove_unused_fast_dds_files({port, mutex}) == []
+    assert not os.path.exists(os.path.join(SHM, port))
+    assert not os.path.exists(os.path.join(SHM, mutex))
