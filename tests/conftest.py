@@ -8,11 +8,14 @@ import re
 import socket
 import signal
 import subprocess
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+from clnn_ros.process_signals import SHOW_STACKS
 
 
 # The longest test files, longest first (seconds per file in a suite run, scripts/test.sh
@@ -46,6 +49,24 @@ def in_private_shm() -> list[str]:
 HUNG_IN_NATIVE = re.compile(r"^run_all: warning: node \w+ did not exit in time, nor on SIGTERM ")
 # Before it terminates a node, run_all shows its stacks under this line; the verdict follows.
 STACKS = re.compile(r"^run_all: node \w+ is slow to exit; the stacks of its threads:$")
+
+
+def tool(env, module, *args) -> subprocess.CompletedProcess:
+    """A tool's run, with a bound against a hang; a hung tool shows the stack of each of its
+    threads (process_signals.SHOW_STACKS; seen once, in fa5: echo --once printed nothing,
+    not even its error after --wait 60)."""
+    process = subprocess.Popen([sys.executable, "-m", module, *args], env=env,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        stdout, stderr = process.communicate(timeout=120)
+    except subprocess.TimeoutExpired:
+        process.send_signal(SHOW_STACKS)
+        time.sleep(1.0)  # for the stacks to be written
+        process.kill()
+        stdout, stderr = process.communicate()
+        raise AssertionError(f"{module} {' '.join(args)} hung; stdout {stdout!r}; stderr "
+                             f"with its threads' stacks:\n{stderr}") from None
+    return subprocess.CompletedProcess(process.args, process.returncode, stdout, stderr)
 
 
 def problem_lines(stderr: str) -> list[str]:

@@ -7,7 +7,6 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -15,12 +14,12 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Byte, Empty, UInt8MultiArray
 
 from clnn_ros.echo import to_csv, to_yaml
-from clnn_ros.process_signals import SHOW_STACKS
 from clnn_ros_msgs.msg import CartPoleState, InputLabels, Reward, SpikeVector, TrialEvent
 
 from test_graph import wait_for_line
 
-from conftest import TERMINAL_COLOR, free_domain_id, ros_environment, without_port_lock_timeouts
+from conftest import (TERMINAL_COLOR, free_domain_id, ros_environment, tool,
+                      without_port_lock_timeouts)
 
 PROBE = Path(__file__).with_name("probe_participant.py")
 SPIKES_FIELDS = "{tick: 7, trial: 1, spikes: [0, 1, 0]}"
@@ -98,24 +97,6 @@ def stop(probes) -> None:
         except subprocess.TimeoutExpired:
             probe.kill()
             probe.wait()
-
-
-def tool(env, module, *args) -> subprocess.CompletedProcess:
-    """A tool's run, with a bound against a hang; a hung tool shows the stack of each of its
-    threads (process_signals.SHOW_STACKS; seen once, in fa5: echo --once printed nothing,
-    not even its error after --wait 60)."""
-    process = subprocess.Popen([sys.executable, "-m", module, *args], env=env,
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        stdout, stderr = process.communicate(timeout=120)
-    except subprocess.TimeoutExpired:
-        process.send_signal(SHOW_STACKS)
-        time.sleep(1.0)  # for the stacks to be written
-        process.kill()
-        stdout, stderr = process.communicate()
-        raise AssertionError(f"{module} {' '.join(args)} hung; stdout {stdout!r}; stderr "
-                             f"with its threads' stacks:\n{stderr}") from None
-    return subprocess.CompletedProcess(process.args, process.returncode, stdout, stderr)
 
 
 def echo_once(env, topic, *options) -> str:

@@ -26,7 +26,7 @@ from clnn_ros.graph.names import STATE
 
 from test_graph import processes_with, wait_for_line
 
-from conftest import HANG_S, free_domain_id, ros_environment
+from conftest import HANG_S, free_domain_id, ros_environment, tool
 
 DOMAIN_ID = free_domain_id()
 REPO = Path(__file__).resolve().parents[1]
@@ -305,11 +305,6 @@ def listed_topics(env, wanted: set[str], *args) -> set[str]:
         lines = set(listed.stdout.splitlines())
     assert wanted <= lines, f"never listed: {sorted(wanted - lines)}; last: {listed.stderr}"
     return lines
-
-
-def tool(env, module, *args, timeout=120):  # a bound against a hang: startup can take long
-    return subprocess.run([sys.executable, "-m", module, *args], env=env, capture_output=True,
-                          text=True, timeout=timeout)
 
 
 @pytest.mark.ros
