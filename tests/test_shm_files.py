@@ -4,6 +4,7 @@ and closes other files meanwhile, as a Fast DDS node does all the time."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
@@ -174,16 +175,21 @@ def test_the_mutex_of_a_port_in_use_is_kept(tmp_path):
     for name in (port, mutex):
         with open(os.path.join(SHM, name), "wb") as f:
             f.write(bytes(4096))
-    listener = subprocess.Popen([sys.executable, "-c", LISTENER, os.path.join(SHM, port),
-                                 "clnn_test"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                text=True)
     try:
-        assert listener.stdout.readline() == "listening\n"
-        time.sleep(SETTLE_S)  # both settled: only their use decides
+        listener = subprocess.Popen([sys.executable, "-c", LISTENER, os.path.join(SHM, port),
+                                     "clnn_test"], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                    text=True)
+        try:
+            assert listener.stdout.readline() == "listening\n"
+            time.sleep(SETTLE_S)  # both settled: only their use decides
+            assert remove_unused_fast_dds_files({port, mutex}) == []
+            assert os.path.exists(os.path.join(SHM, mutex))
+        finally:
+            listener.communicate(timeout=30)
         assert remove_unused_fast_dds_files({port, mutex}) == []
-        assert os.path.exists(os.path.join(SHM, mutex))
-    finally:
-        listener.communicate(timeout=30)
-    assert remove_unused_fast_dds_files({port, mutex}) == []
-    assert not os.path.exists(os.path.join(SHM, port))
-    assert not os.path.exists(os.path.join(SHM, mutex))
+        assert not os.path.exists(os.path.join(SHM, port))
+        assert not os.path.exists(os.path.join(SHM, mutex))
+    finally:  # a failing run leaves nothing in the machine's /dev/shm either
+        for name in (port, mutex):
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(os.path.join(SHM, name))
