@@ -18,7 +18,7 @@ from .core.checkpoint import (Checkpoint, CheckpointError, check_resumable, firs
                               load_checkpoint, restore_counter)
 from .core.optimal import optimal_weights
 from .core.params import Params
-from .core.rln import SuccessCounter
+from .core.agent import SuccessCounter
 
 # The names of the optimal weights, and the state variables they are made for.
 OPTIMAL = {"fig7": 1, "fig12": 2}

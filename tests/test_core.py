@@ -12,7 +12,8 @@ from clnn_ros.core.params import ParamError, Params, params_from_strings
 from clnn_ros.core.physics import (CONTINUE, FAIL_POSITION, CartPole, cartpole_step,
                                    physics_constants)
 from clnn_ros.core.random_stream import next_uniform
-from clnn_ros.core.rln import NONE, PUNISH, REWARD, RLNAgent, SuccessCounter
+from clnn_ros.core.agent import RLNAgent, SuccessCounter
+from clnn_ros.core.rln import NONE, PUNISH, REWARD
 
 
 def state(theta_deg=0.0, x_dot=0.0):
@@ -294,3 +295,40 @@ def test_agent_refuses_weights_out_of_range():
         RLNAgent(Params(), np.zeros((2, 3, 5)))
     with pytest.raises(ValueError, match=r"\[0, w_max"):
         RLNAgent(Params(), np.full((2, 3, 6), 9.0))
+
+
+@pytest.mark.parametrize("tie_break", ["exact", "index", "random"])
+def test_kept_decisions_are_those_of_the_current_weights(tie_break):
+    # The agent keeps its decision for each input pattern until the weights change: after
+    # punishments, rewards, re-randomizations and a loaded state, every decision is the one the
+    # rule makes anew (a twin agent without kept decisions draws the same random ties).
+    p = Params(nsv=2, sigma=3, omega=2, tie_break=tie_break, rerandomize_every=4,
+               rerandomize_fraction=0.3, rerandomize_range=2.0)
+    weights, _ = seed_setup(5, p)
+    agent, twin = RLNAgent(p, weights, seed=5), RLNAgent(p, weights, seed=5)
+    encoder, draws = Encoder.from_params(p), np.random.default_rng(0)
+    patterns = [encoder.spikes(state(theta, velocity)) for theta in (-3.0, -0.5, 0.5, 3.0)
+                for velocity in (-9.0, 0.0, 9.0)]
+    kept = 0
+    for tick in range(600):
+        if tick % 50 == 0:
+            agent.begin_trial(tick // 50)
+            twin.begin_trial(tick // 50)
+        if tick == 300:
+            agent.load_state(RLNAgent(p, seed_setup(6, p)[0]).state())
+            twin.load_state(agent.state())
+        spikes = patterns[draws.integers(len(patterns))]
+        kept += agent._decisions.get(np.flatnonzero(spikes).tobytes()) is not None
+        twin._decisions.clear()
+        assert agent.act(spikes) == twin.act(spikes), tick
+        kind = (PUNISH, REWARD, *[NONE] * 6)[draws.integers(8)]
+        agent.learn(kind)
+        twin.learn(kind)
+        np.testing.assert_array_equal(agent.weights, twin.weights)
+    assert (kept > 100) == (tie_break != "random")  # the decisions were kept between changes
+
+
+def test_agent_weights_change_only_by_the_rule():
+    agent = RLNAgent(Params(), np.full((2, 3, 6), 4.5))
+    with pytest.raises(ValueError, match="read-only"):
+        agent.weights[0, 0, 0] = 1.0

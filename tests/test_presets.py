@@ -21,7 +21,7 @@ from clnn_ros.core.gym_physics import GYM_PHYSICS, gym_matched_params
 from clnn_ros.core.params import Params, params_from_strings
 from clnn_ros.core.physics import CartPole
 from clnn_ros.core.presets import PRESETS, Preset, overlay_values, preset_values
-from clnn_ros.core.rln import RLNAgent
+from clnn_ros.core.agent import RLNAgent
 from clnn_ros.reproduce.__main__ import build_parser, learn_params, main
 from clnn_ros.reproduce.common import TRIALS
 from clnn_ros.reproduce.gym_eval import GYM_ID, frozen, gym_eval, load_learn_output, reset_seed

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from .params import ParamError, Params
-from .rln import RLNAgent, SuccessCounter
+from .agent import RLNAgent, SuccessCounter
 
 FORMAT = "clnn_ros.checkpoint"
 FORMAT_VERSION = 1

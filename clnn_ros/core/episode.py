@@ -29,7 +29,7 @@ from .checkpoint import Checkpoint, capture, check_resumable, restore
 from .encoder import Encoder
 from .params import Params
 from .physics import CONTINUE, CartPole
-from .rln import RLNAgent, SuccessCounter
+from .agent import RLNAgent, SuccessCounter
 
 
 def angle_grid(p: Params) -> np.ndarray:

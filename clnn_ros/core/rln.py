@@ -28,8 +28,8 @@ The rule is written once, as the functions below (`jitable`: plain Python when c
 from Python, compiled into the numba batch engine, clnn_ros.batch, which calls the same
 functions). Every option of the rule (tie_break, inference, tagging, e_flag, punish_timing,
 decay_counters, success_counter, rerandomize_*) is decided here and nowhere else; core.rule
-holds their values (Rule) and the reward kinds. The classes at the end hold the state and call
-them, tick by tick.
+holds their values (Rule) and the reward kinds. The classes of core.agent hold the state and
+call them, tick by tick.
 """
 
 from __future__ import annotations
@@ -267,117 +267,3 @@ def outcome(count, failed, rule):
     if count == rule.sigma:
         return REWARD, 0
     return NONE, count
-
-
-class SuccessCounter:
-    """Counts successful steps; signals a positive reward every sigma of them and a punishment on
-    failure (the paper's 1-hot reward R)."""
-
-    def __init__(self, params: Params):
-        self.rule = Rule.from_params(params)
-        self.count = 0
-
-    def begin_trial(self) -> None:
-        self.count = trial_start_count(self.count, self.rule)
-
-    def outcome(self, failed: bool) -> int:
-        """The reward kind for a step's outcome: PUNISH, REWARD or NONE."""
-        kind, self.count = outcome(self.count, failed, self.rule)
-        return kind
-
-
-class RLNAgent:
-    """Two RLNs with a network WTA: spikes in, action out; a reward kind in, weights updated."""
-
-    def __init__(self, params: Params, weights: np.ndarray, seed: int = 0):
-        shape = (2, params.n_segments, params.n_inputs)
-        weights = np.asarray(weights, dtype=np.float64)
-        if weights.shape != shape:
-            raise ValueError(f"weights must have shape {shape}, got {weights.shape}")
-        if not np.all((weights >= 0) & (weights <= params.w_max)):
-            raise ValueError(f"weights must lie in [0, w_max={params.w_max:g}]")
-        self.p = params
-        self.rule = Rule.from_params(params)
-        self.weights = weights.copy()
-        self.tick = 0  # the clock of the decay counters
-        self.punish_tagged_at = np.full(shape, NEVER, dtype=np.int64)  # c- per synapse
-        self.reward_tagged_at = np.full(shape[:2], NEVER, dtype=np.int64)  # c+ per segment
-        self.eligible = np.zeros(shape, dtype=np.uint8)  # e flag per synapse
-        self.last_spikes = np.zeros(shape[2], dtype=np.uint8)
-        self.random_state = np.array([seed], dtype=np.uint64)  # only used by tie_break="random"
-
-    @property
-    def punish_counter(self) -> np.ndarray:
-        """c- per synapse, (2, q, n_inputs)."""
-        return counter_value(self.punish_tagged_at, self.tick, self.rule.omega)
-
-    @punish_counter.setter
-    def punish_counter(self, values: np.ndarray) -> None:
-        self.punish_tagged_at = self._tagged_at(values, self.rule.omega)
-
-    @property
-    def reward_counter(self) -> np.ndarray:
-        """c+ per segment, (2, q)."""
-        return counter_value(self.reward_tagged_at, self.tick, self.rule.sigma)
-
-    @reward_counter.setter
-    def reward_counter(self, values: np.ndarray) -> None:
-        self.reward_tagged_at = self._tagged_at(values, self.rule.sigma)
-
-    def _tagged_at(self, values: np.ndarray, window: int) -> np.ndarray:
-        """The ticks at which counters of these values were set (counter_value inverted)."""
-        return np.where(values > 0, self.tick - (window - values), NEVER).astype(np.int64)
-
-    # Everything that changes while the agent runs (its state), by attribute name; the counters
-    # as their values, as the paper has them.
-    STATE = ("weights", "punish_counter", "reward_counter", "eligible", "last_spikes",
-             "random_state")
-
-    def state(self) -> dict[str, np.ndarray]:
-        """Copies of the agent's whole state (what core.checkpoint saves)."""
-        return {name: getattr(self, name).copy() for name in self.STATE}
-
-    def load_state(self, state: dict[str, np.ndarray]) -> None:
-        """Take over a state from state(): each array must have its attribute's shape and dtype;
-        ValueError otherwise."""
-        values = {name: np.array(state[name]) for name in self.STATE}  # copies
-        for name, value in values.items():  # all checked before any is taken over
-            current = getattr(self, name)
-            if value.shape != current.shape or value.dtype != current.dtype:
-                raise ValueError(f"{name} must be {current.dtype} of shape {current.shape}, "
-                                 f"got {value.dtype} of shape {value.shape}")
-        for name, value in values.items():
-            setattr(self, name, value)
-
-    def begin_trial(self, trial: int, learn: bool = True) -> None:
-        """Trial `trial` of the episode (0 = the first) begins: counters and e flags restart
-        (unless decay_counters="carry"); the weights carry over, but for those a learning agent
-        re-randomizes (rerandomize_every)."""
-        restart_counters(self.punish_tagged_at, self.reward_tagged_at, self.eligible, self.rule)
-        if learn:
-            with np.errstate(over="ignore"):  # the random stream wraps around by design
-                rerandomize(self.weights, trial, self.rule, self.random_state)
-
-    def infer(self, spikes: np.ndarray) -> tuple[int, tuple[int, int]]:
-        """(winning neuron, the dendrite winner of each neuron) for a spike vector."""
-        with np.errstate(over="ignore"):  # tie_break="random": the stream wraps around by design
-            neuron, s0, s1 = infer(self.weights, np.flatnonzero(spikes), self.rule,
-                                   self.random_state, response_space(self.p.n_segments))
-        return neuron, (s0, s1)
-
-    def act(self, spikes: np.ndarray) -> tuple[int, int]:
-        """Infer and tag the action path; returns (action = winning neuron, 0 = -F and 1 = +F,
-        its winning segment)."""
-        spikes = np.asarray(spikes, dtype=np.uint8)
-        neuron, segments = self.infer(spikes)
-        with np.errstate(over="ignore"):  # the random stream wraps around by design
-            neuron = explore(neuron, self.rule, self.random_state)
-        self.last_spikes = spikes
-        tag_action_path(self.punish_tagged_at, self.reward_tagged_at, self.eligible, neuron,
-                        segments, np.flatnonzero(spikes), self.tick, self.rule)
-        return neuron, segments[neuron]
-
-    def learn(self, kind: int) -> None:
-        """Apply a reward kind (NONE, REWARD, PUNISH), then decay every counter by one."""
-        self.tick = update(kind, self.weights, self.punish_tagged_at, self.reward_tagged_at,
-                           self.eligible, np.flatnonzero(self.last_spikes), self.tick, self.rule)

@@ -17,7 +17,7 @@ from ..core.episode import angle_grid
 from ..core.optimal import optimal_weights
 from ..core.params import Params
 from ..core.physics import CONTINUE, cartpole_step, physics_constants
-from ..core.rln import RLNAgent
+from ..core.agent import RLNAgent
 from .common import (EDGE_SCAN, LITERAL_EDGE, MODES, PAPER, PAPER_MODE, end_reason, mode_label,
                      progress, trace_trial, write_csv)
 

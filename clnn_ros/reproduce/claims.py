@@ -10,7 +10,7 @@ import numpy as np
 from ..core.optimal import optimal_weights
 from ..core.params import Params
 from ..core.physics import CONTINUE, FAIL_POSITION
-from ..core.rln import RLNAgent
+from ..core.agent import RLNAgent
 from .calibration import Calibration
 from .common import (EDGE_SCAN, END_REASONS, LITERAL_EDGE, MAX_STEPS, PAPER, STUCK_BELOW,
                      end_reason, stuck)

@@ -23,7 +23,7 @@ from ..core.encoder import Encoder
 from ..core.episode import run_trial
 from ..core.params import Params
 from ..core.physics import CartPole
-from ..core.rln import RLNAgent, SuccessCounter
+from ..core.agent import RLNAgent, SuccessCounter
 
 # ------------------------------------------------------------------------------------------------
 # Settings

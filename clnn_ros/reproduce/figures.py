@@ -14,7 +14,7 @@ from ..batch import run_batch
 from ..core.optimal import optimal_weights
 from ..core.params import Params
 from ..core.physics import CONTINUE, FAIL_POSITION
-from ..core.rln import RLNAgent
+from ..core.agent import RLNAgent
 from .calibration import Calibration
 from .common import (EDGE_SCAN, END_REASONS, LITERAL_EDGE, MAX_STEPS, PAPER, mode_label, progress,
                      trace_trial)

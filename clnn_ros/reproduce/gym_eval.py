@@ -30,7 +30,7 @@ import numpy as np
 from ..core.encoder import Encoder
 from ..core.gym_physics import GYM_PHYSICS
 from ..core.params import Params
-from ..core.rln import RLNAgent
+from ..core.agent import RLNAgent
 from .common import progress, write_csv
 
 GYM_ID = "CartPole-v1"
