@@ -59,7 +59,6 @@ class EnvironmentNode(Node):
     def __init__(self, run: dict, **node_options):
         super().__init__("environment", **node_options)
         self.params, settings = declare_run_parameters(self, run)
-        use_sim_time(self, "environment")
         self.tau_ns = tick_nanoseconds(self.params.tau)
         self.cartpole, pole_half_length_m, track_limit_m = simulator(settings["simulator"],
                                                                      self.params)
@@ -83,6 +82,9 @@ class EnvironmentNode(Node):
                                            LOCKSTEP_QOS)
                   for msg_type, topic, callback in ((Clock, CLOCK, self.on_clock),
                                                     (Action, ACTION, self.on_action))]
+        # Sim time after the node's own /clock subscription: rclpy's TimeSource subscribes then,
+        # and a clock reaches it after the tick's state is out, off the tick's critical path.
+        use_sim_time(self, "environment")
         self.ends_with_the_episode = ends_with_the_episode(
             self.finished, self.refusals, lambda: (self.tick, list(self.pending)),
             self.get_logger().warning)
