@@ -6,6 +6,7 @@ own without markers (the example) still runs the graph and is recorded."""
 from __future__ import annotations
 
 import math
+import random
 import subprocess
 import sys
 from pathlib import Path
@@ -54,6 +55,16 @@ def test_the_pole_leans_by_the_state_angle_toward_plus_x_from_the_cart_top(angle
                                  CART_SIZE_M[2] + length * math.cos(theta)), abs=1e-12)
     assert markers[CART].pose.position.x == 0.7
     assert [m.header.stamp for m in markers] == [Time(sec=3, nanosec=40)] * 3
+
+
+def test_the_serialized_markers_are_rclpys_serialization_of_the_markers():
+    from rclpy.serialization import serialize_message
+    markers, draw = CartPoleMarkers(POLE_HALF_LENGTH_M, 2.4), random.Random(0)
+    for stamp in [(0, 0), (2**31 - 1, 999_999_999)] + [
+            (draw.randrange(2**31), draw.randrange(10**9)) for _ in range(200)]:
+        x, angle = draw.uniform(-2.4, 2.4), draw.uniform(-12.0, 12.0)
+        assert markers.serialized(stamp, x, angle) == serialize_message(
+            markers.update(stamp, x, angle))
 
 
 @pytest.fixture(scope="module")

@@ -162,7 +162,7 @@ class EnvironmentNode(Node):
         state.successful_steps = self.successful_steps
         self.state_pub.publish(state)
         if self.markers_pub and self.tick % self.marker_period == 0:
-            self.markers_pub.publish(self.markers.update(
+            self.markers_pub.publish(self.markers.serialized(
                 tick_stamp(self.tick, self.tau_ns), state.cart_position_m, state.pole_angle_deg))
         self.tick += 1
 
