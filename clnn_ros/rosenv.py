@@ -86,6 +86,14 @@ def removed_listening_ports(pid: int | str) -> list[str]:
     return sorted(listened & removed)
 
 
+def deafness(pid: int | str, who: str) -> str:
+    """"<who> listens on shared-memory ports whose files were removed under it (...): what was
+    sent there never reached it" if process `pid` does (removed_listening_ports), else ""."""
+    removed = removed_listening_ports(pid)
+    return f"{who} listens on shared-memory ports whose files were removed under it " \
+           f"({', '.join(removed)}): what was sent there never reached it" if removed else ""
+
+
 def own_fast_dds_files(pid: int | str) -> set[str]:
     """The Fast DDS files that belong to process `pid`: its segment and the ports it listens on,
     each known by the lock file it holds open (`<name>_el`, `<name>_sl`), with the port's

@@ -29,9 +29,9 @@ from .graph.fields import COMPLETED
 from .graph.names import GRAPH_NODES, RECORDER, TRIAL_MANAGER
 from .graph.run import node_arguments, write_params
 from .process_signals import EXIT_WITH_STDIN, SHOW_STACKS
-from .rosenv import (SHM_CLEANED_BY_SUPERVISOR, own_fast_dds_files,
+from .rosenv import (SHM_CLEANED_BY_SUPERVISOR, deafness, own_fast_dds_files,
                      remove_files_of_dead_process, remove_unused_fast_dds_files,
-                     removed_listening_ports, written_fast_dds_files)
+                     written_fast_dds_files)
 
 NODES = (*GRAPH_NODES, TRIAL_MANAGER)
 # After the episode ends or Ctrl-C, how long the nodes get to exit by themselves, and then the
@@ -235,10 +235,8 @@ class Supervisor:
         for child, grace in zip(chosen, graces):
             if child.wait_while(lambda: grace.elapsed() < grace_s):
                 continue
-            if removed := removed_listening_ports(child.process.pid):  # then it heard nothing
-                say(f"run_all: node {child.name} listens on shared-memory ports whose files "
-                    f"were removed under it ({', '.join(removed)}): what was sent there never "
-                    f"reached it")
+            if deaf := deafness(child.process.pid, f"node {child.name}"):  # it heard nothing
+                say(f"run_all: {deaf}")
             if child.shows_stacks:  # where it hangs, in the run's log
                 say(f"run_all: node {child.name} is slow to exit; the stacks of its threads:")
                 child.signal(SHOW_STACKS)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import platform
 import pstats
+import statistics
 from pathlib import Path
 
 from bench_paced import HOGS
@@ -137,14 +138,24 @@ def report(rows, paced, ser, composed, separate, sizes, quick, elapsed, loads, s
             f"{f'{100 * g[0] / t[0]:.0f}%' if t else '-'} |")
     lines += ["", "Targets (EventsExecutor, graph / raw UInt64 ring): at least "
               f"{100 * TARGETS['separate']:.0f}% in 5 processes and "
-              f"{100 * TARGETS['composed']:.0f}% composed:", ""]
+              f"{100 * TARGETS['composed']:.0f}% composed. A slowdown of the machine that hits "
+              "the ring's runs more than the graph's lifts the best-of ratio (seen on this machine: "
+              "a composed ring at two thirds of the rate of the runs before and after), so the "
+              "verdict "
+              "also asks the median of the rounds' own ratios (the graph's run over the ring's "
+              "run of the same round, minutes apart at most) to reach the target:", ""]
     sim_time = []
     for layout in LAYOUTS:
         r = by_layout[layout]
         ratio = r["graph"][0] / r["uint64"][0]
-        verdict = "**met**" if ratio >= TARGETS[layout] else \
-            f"**missed** ({100 * (TARGETS[layout] - ratio):.0f} points short)"
-        lines.append(f"* {LAYOUT_NAMES[layout]}: {100 * ratio:.0f}% against "
+        rounds = [g / u for g, u in zip(r["graph"][1], r["uint64"][1])]
+        median = statistics.median(rounds)
+        worse = min(ratio, median)
+        verdict = "**met**" if worse >= TARGETS[layout] else \
+            f"**missed** ({100 * (TARGETS[layout] - worse):.0f} points short)"
+        lines.append(f"* {LAYOUT_NAMES[layout]}: {100 * ratio:.0f}% best of each, "
+                     f"{100 * median:.0f}% the median of the rounds' ratios "
+                     f"({', '.join(f'{100 * x:.0f}%' for x in rounds)}), against "
                      f"{100 * TARGETS[layout]:.0f}%: {verdict}.")
         sim_time.append(f"* {LAYOUT_NAMES[layout]}: {fmt_rate(*r['graph_sim'])} ticks/s with "
                         f"sim time everywhere, {fmt_rate(*r['graph'])} as it runs: "

@@ -11,7 +11,7 @@ REPO = Path(__file__).resolve().parents[1]
 SEED = 1
 # Seed 1, 1 SV: a trial is about 270 ticks; 30 trials = 8402 ticks, 8 = 1912, 6 = 1381,
 # 5 = 1115, 2 = 302.
-FULL = dict(repeats=3, graph_trials={"events": 30, "single": 5},
+FULL = dict(repeats=5, graph_trials={"events": 30, "single": 5},
             ring_ticks={("separate", "events"): 5000, ("composed", "events"): 20000,
                         ("separate", "single"): 1000, ("composed", "single"): 1000},
             profile_trials=8, paced_trials=6)

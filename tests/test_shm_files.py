@@ -146,24 +146,24 @@ def test_a_listening_port_whose_file_was_removed_is_named(tmp_path):
 
 
 def test_a_deaf_node_says_so_of_itself(tmp_path):
-    """glue.deafness, the trial manager's addition to a stall: its own port removed under it."""
+    """glue.own_deafness, the trial manager's addition to a stall: its own port removed under it."""
     port = tmp_path / "fastrtps_port64997"
     port.write_bytes(bytes(4096))
     deaf = """
 import ctypes, mmap, os, sys
-from clnn_ros.nodes.glue import deafness
+from clnn_ros.nodes.glue import own_deafness
 ctypes.CDLL(None).prctl(15, b"dds.shm.64997", 0, 0, 0)
 with open(sys.argv[1], "r+b") as f:
     port = mmap.mmap(f.fileno(), 4096)
-print(repr(deafness()))
+print(repr(own_deafness()))
 os.unlink(sys.argv[1])
-print(deafness())
+print(own_deafness())
 """
     said = subprocess.run([sys.executable, "-c", deaf, str(port)], capture_output=True,
                           text=True, timeout=60)
     assert said.stdout.splitlines() == [
         "''", "; this node listens on shared-memory ports whose files were removed under it "
-              "(fastrtps_port64997): it heard nothing sent there"], said.stderr
+              "(fastrtps_port64997): what was sent there never reached it"], said.stderr
 
 
 def test_the_mutex_of_a_port_in_use_is_kept(tmp_path):

@@ -29,8 +29,8 @@ from ..graph.run import (DESCRIPTIONS, declared_values, node_parameters, read_pa
                          names_list)
 from ..graph.watch import claim_order, graph_claim
 from ..rclpy_session import qos_profile, ros_session, spin_until_finished, split_ros_arguments
-from ..rosenv import (SHM_CLEANED_BY_SUPERVISOR, remove_unused_fast_dds_files,
-                      removed_listening_ports, written_fast_dds_files)
+from ..rosenv import (SHM_CLEANED_BY_SUPERVISOR, deafness, remove_unused_fast_dds_files,
+                      written_fast_dds_files)
 
 LOCKSTEP_QOS = qos_profile(qos.LOCKSTEP)
 READY_QOS = qos_profile(qos.READY)
@@ -189,12 +189,11 @@ class GraphClaim:
         self.on_other(other < claim_order(self.claim))
 
 
-def deafness() -> str:
+def own_deafness() -> str:
     """"; ..." if this process listens on shared-memory ports whose files were removed under it
-    (rosenv.removed_listening_ports): then it heard nothing sent there, and it is to blame."""
-    removed = removed_listening_ports(os.getpid())
-    return f"; this node listens on shared-memory ports whose files were removed under it " \
-           f"({', '.join(removed)}): it heard nothing sent there" if removed else ""
+    (rosenv.deafness): then it heard nothing sent there, and it is to blame."""
+    deaf = deafness(os.getpid(), "this node")
+    return f"; {deaf}" if deaf else ""
 
 
 def deliver_published(node: Node) -> None:
