@@ -108,11 +108,12 @@ class Child:
         return self.process.poll()
 
     def describe_exit(self) -> str:
-        """'node 'x' exited with status 3' / 'died (SIGKILL)', or the child's own last error
-        line first ('disk full writing F (node 'recorder' exited with status 1)')."""
+        """'node 'x' exited with status 3' / 'died (SIGKILL)' / 'exited with status 0 before
+        the episode ended' (a failure only then), or the child's own last error line first
+        ('disk full writing F (node 'recorder' exited with status 1)')."""
         code = self.process.returncode
-        how = f"exited with status {code}" if code >= 0 else \
-            f"died ({signal.Signals(-code).name})"
+        how = f"exited with status {code}" if code > 0 else "exited with status 0 before the " \
+            "episode ended" if code == 0 else f"died ({signal.Signals(-code).name})"
         own = self.own_error()
         return f"{own} (node '{self.name}' {how})" if own else f"node '{self.name}' {how}"
 
@@ -287,18 +288,20 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
                              shows_stacks=command[:2] == [sys.executable, "-m"] and
                              command[2].startswith("clnn_ros."))
     manager = supervisor.children[TRIAL_MANAGER]
-    failure, ended, outcome, status, quit_at = None, None, None, None, None
+    failure, ended, outcome, status, since_quit = None, None, None, None, None
     while manager.returncode is None and not interrupted:
         if failure := supervisor.first_failure(exclude={TRIAL_MANAGER}):
             break
         if ended is None and (outcome := fresh_summary(Path(values["out_dir"]), began)):
             ended = Grace(manager.process.pid)  # the episode is over and its results written
         # A node ends with status 0 after the episode's end, or when someone else stopped it
-        # (SIGINT, SIGTERM): then the trial manager, which has not ended, never will.
+        # (SIGINT, SIGTERM): then the trial manager, which has not ended, never will. It sends
+        # the end before it writes the results: a starved one may take long to write them.
         quitter = next((c for name, c in supervisor.children.items()
                         if name in NODES and c.returncode == 0), None)
-        quit_at = (quit_at or time.monotonic()) if quitter and ended is None else None
-        if quit_at is not None and time.monotonic() - quit_at > SHUTDOWN_GRACE_S:
+        since_quit = (since_quit or Grace(manager.process.pid)) \
+            if quitter and ended is None else None
+        if since_quit is not None and since_quit.elapsed() > SHUTDOWN_GRACE_S:
             failure = quitter
             break
         if ended is not None and ended.elapsed() > SHUTDOWN_GRACE_S:

@@ -86,6 +86,23 @@ def test_killed_process_is_named_at_once_and_the_graph_comes_down(ros_env, tmp_p
     assert not processes_with(str(tmp_path))
 
 
+def test_a_node_stopped_by_someone_else_is_named(ros_env, tmp_path):
+    """SIGTERM to one node (it ends with status 0, before the episode's end): the trial manager
+    never ends, and with a stall timeout longer than the grace run_all names the node once the
+    trial manager has had SHUTDOWN_GRACE_S of time to end (supervise.Grace)."""
+    process = start_run(ros_env, tmp_path, "--stall-timeout", "60")
+    stderr = ReadLines(process.stderr)
+    wait_for_line(process.stdout, "trial    2/")
+    os.kill(child(process, "clnn_ros.nodes.reward"), signal.SIGTERM)
+    process.wait(timeout=120)
+    text = stderr.text()
+    assert process.returncode == 1, text[-3000:]
+    assert problem_lines(text) == [
+        "run_all: error: node 'reward' exited with status 0 before the episode ended"], \
+        text[-3000:]
+    assert not processes_with(str(tmp_path))
+
+
 @pytest.mark.parametrize("node", PROCESSES)
 def test_a_paused_process_is_waited_for(ros_env, tmp_path, node):
     """SIGSTOP for 3 s (below the default stall timeout of 5 s), then SIGCONT: nothing is
