@@ -16,7 +16,6 @@ launch waiting on a stall or forever.
 
 from __future__ import annotations
 
-import signal
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,7 +23,7 @@ from .core.params import ParamError
 from .files import cannot_create
 from .graph.names import GRAPH_NODES, RECORDER, TRIAL_MANAGER, clock_remappings, namespace_problem
 from .graph.run import DEMO, ENVIRONMENTS, RUN_SETTINGS, default_bag_path, run_values, write_params
-from .supervise import RECORDER_GRACE_S, SHUTDOWN_GRACE_S
+from .supervise import RECORDER_GRACE_S, SHUTDOWN_GRACE_S, exit_description
 
 # launch argument: description; an empty value leaves it out. RUN_VALUES are run values.
 ARGUMENTS = {
@@ -92,13 +91,6 @@ def plan(arguments: dict[str, str], workdir: Path) -> list[NodeLaunch]:
                     if name != "environment" or env != "external"]
 
 
-def exit_description(name: str, returncode: int) -> str:
-    """The line run_all says: `node 'x' exited with status 3`, `node 'x' died (SIGKILL)`."""
-    how = f"exited with status {returncode}" if returncode >= 0 else \
-        f"died ({signal.Signals(-returncode).name})"
-    return f"node '{name}' {how}"
-
-
 @dataclass(frozen=True)
 class Step:
     """What the launch does after an exit or when its timer fires: `fail`: end now with this
@@ -162,5 +154,4 @@ class Supervision:
         return Step(fail=self.failure or self.quit_early())
 
     def quit_early(self) -> str | None:
-        return f"node '{self.quitter}' exited with status 0 before the episode ended" \
-            if self.quitter else None
+        return exit_description(self.quitter, 0) if self.quitter else None

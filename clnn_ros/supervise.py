@@ -73,6 +73,16 @@ class Grace:
         return time.monotonic() - self.began - (waited_for_cpu_s(self.pid) - self.waited)
 
 
+def exit_description(name: str, returncode: int) -> str:
+    """A node's exit as run_all and launch say it: `node 'x' exited with status 3`, `node 'x'
+    died (SIGKILL)`, or for status 0 (a failure only before the episode's end) `node 'x'
+    exited with status 0 before the episode ended`."""
+    if returncode < 0:
+        return f"node '{name}' died ({signal.Signals(-returncode).name})"
+    return f"node '{name}' exited with status {returncode}" + (
+        " before the episode ended" if returncode == 0 else "")
+
+
 def say(line: str) -> None:
     """One whole line on run_all's stderr (the children's stderr readers write there too)."""
     with _STDERR:
@@ -108,14 +118,11 @@ class Child:
         return self.process.poll()
 
     def describe_exit(self) -> str:
-        """'node 'x' exited with status 3' / 'died (SIGKILL)' / 'exited with status 0 before
-        the episode ended' (a failure only then), or the child's own last error line first
-        ('disk full writing F (node 'recorder' exited with status 1)')."""
-        code = self.process.returncode
-        how = f"exited with status {code}" if code > 0 else "exited with status 0 before the " \
-            "episode ended" if code == 0 else f"died ({signal.Signals(-code).name})"
+        """exit_description, or the child's own last error line first ('disk full writing F
+        (node 'recorder' exited with status 1)')."""
+        exit_line = exit_description(self.name, self.process.returncode)
         own = self.own_error()
-        return f"{own} (node '{self.name}' {how})" if own else f"node '{self.name}' {how}"
+        return f"{own} ({exit_line})" if own else exit_line
 
     def own_error(self) -> str | None:
         """The message of the child's last error line, if it wrote one."""
