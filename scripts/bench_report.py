@@ -139,11 +139,11 @@ def report(rows, paced, ser, composed, separate, sizes, quick, elapsed, loads, s
     lines += ["", "Targets (EventsExecutor, graph / raw UInt64 ring): at least "
               f"{100 * TARGETS['separate']:.0f}% in 5 processes and "
               f"{100 * TARGETS['composed']:.0f}% composed. A slowdown of the machine that hits "
-              "the ring's runs more than the graph's lifts the best-of ratio (seen on this machine: "
-              "a composed ring at two thirds of the rate of the runs before and after), so the "
-              "verdict "
-              "also asks the median of the rounds' own ratios (the graph's run over the ring's "
-              "run of the same round, minutes apart at most) to reach the target:", ""]
+              "the ring's runs more than the graph's lifts the best-of ratio (seen on this "
+              "machine: a composed ring at two thirds of the rate of the runs before and after), "
+              "so the verdict also asks the median of the rounds' own ratios (the graph's run "
+              "over the ring's run of the same round, minutes apart at most) to reach the "
+              "target:", ""]
     sim_time = []
     for layout in LAYOUTS:
         r = by_layout[layout]

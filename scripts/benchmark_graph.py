@@ -31,9 +31,10 @@ the ring's, the benchmark's own).
    default) and rclpy's SingleThreadedExecutor (CLNN_ROS_EXECUTOR=single). Every configuration
    runs REPEATS times, round robin; the best (highest) rate counts, the least disturbed by other
    load on the machine, with the range of all runs; a target is met only if the median of the
-   rounds' own ratios (graph over ring of the same round) reaches it too. With the EventsExecutor also the graph with
-   sim time in every node (bench_settings.OWN_TIME_ROLES started with use_sim_time true, as
-   before 2026-12-03): what rclpy's TimeSource and its /clock deliveries cost.
+   rounds' own ratios (graph over ring of the same round) reaches it too. With the
+   EventsExecutor also the graph with sim time in every node (bench_settings.OWN_TIME_ROLES
+   started with use_sim_time true, as before 2026-12-03): what rclpy's TimeSource and its
+   /clock deliveries cost.
 2. Per-tick latency of the graph, from the same graph runs: in the trial manager, the wall
    time from publishing clock(t) to holding state(t) and action(t) (one tick's whole round trip
    through the graph), timed by bench_node.py through the trial manager's public attributes:
