@@ -148,21 +148,26 @@ def remove_files_of_dead_process(names: set[str]) -> list[str]:
 def shm_files_in_use() -> set[str]:
     """Names under /dev/shm that some process has mapped or open. A Fast DDS file no process
     uses is left over by a process that was killed (`fastdds shm clean` removes those). Only
-    the processes that see this /dev/shm count (the same mount namespace): one with a /dev/shm
-    of its own (a container, a test's private one) has files of the same names (the ports from
-    7000 up), and its use of them kept this one's leftovers, measured."""
-    used, ours = set(), _mount_namespace("self")
+    the processes that see this /dev/shm count: one with a /dev/shm of its own (a container, a
+    test's private one) has files of the same names (the ports from 7000 up), and its use of
+    them kept this one's leftovers, measured. Whether a process sees this /dev/shm is told by
+    the file system it finds there, not by its mount namespace: `ip netns exec` (a network
+    namespace: another host in lab.two_hosts) gives a mount namespace of its own that shares
+    /dev/shm, and a run there took the files of this namespace's live processes for unused."""
+    used, ours = set(), _shm_seen_by("self")
     for pid in filter(str.isdigit, os.listdir("/proc")):
-        if _mount_namespace(pid) == ours:
+        if _shm_seen_by(pid) == ours:
             used |= shm_files_of(pid)
     return used
 
 
-def _mount_namespace(pid: int | str) -> str | None:
+def _shm_seen_by(pid: int | str) -> tuple[int, int] | None:
+    """The /dev/shm that process `pid` sees, as (device, inode), through its root."""
     try:
-        return os.readlink(f"/proc/{pid}/ns/mnt")
+        seen = os.stat(f"/proc/{pid}/root{SHM}")
     except OSError:
         return None  # ended, or not ours to read
+    return seen.st_dev, seen.st_ino
 
 
 def unused_fast_dds_files(names: set[str] | None = None) -> set[str]:

@@ -108,6 +108,32 @@ def test_a_file_of_the_same_name_in_another_dev_shm_does_not_keep_this_one(tmp_p
             os.unlink(path)
 
 
+def test_a_process_in_another_mount_namespace_on_this_dev_shm_keeps_its_file(tmp_path):
+    """A process whose mount namespace is its own but whose /dev/shm is this one (as under
+    `ip netns exec`, lab.two_hosts' other host) maps a file: it is in use and kept (before,
+    removed: only processes of this mount namespace counted, so a run in a network namespace
+    removed the live ports of runs beside it, whose port numbers it had used)."""
+    other_namespace = ["unshare", "--mount"]
+    if subprocess.run([*other_namespace, "true"], capture_output=True).returncode != 0:
+        pytest.skip("no mount namespace can be made here")
+    name = f"fastrtps_clnn_test_{os.getpid()}_{tmp_path.name}"
+    path = os.path.join(SHM, name)
+    other = subprocess.Popen([*other_namespace, sys.executable, "-c", SLOW_CREATOR, path, "0"],
+                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert other.stdout.readline() == "created\n"
+        assert other.stdout.readline() == "mapped\n"
+        assert os.readlink(f"/proc/{other.pid}/ns/mnt") != os.readlink("/proc/self/ns/mnt")
+        assert name in shm_files_in_use()
+        assert remove_unused_fast_dds_files({name}) == []
+        assert os.path.exists(path)
+    finally:
+        other.kill()
+        other.wait()
+        if os.path.exists(path):
+            os.unlink(path)
+
+
 # A listener as Fast DDS runs one: a thread named dds.shm.<port> with the port's file mapped.
 LISTENER = """
 import ctypes, mmap, sys
