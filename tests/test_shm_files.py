@@ -9,6 +9,7 @@ import os
 import subprocess
 import sys
 import time
+from typing import Iterator
 
 import pytest
 
@@ -82,6 +83,24 @@ def test_a_file_being_set_up_is_kept_and_an_old_unused_one_is_removed(tmp_path):
     assert not os.path.exists(path)  # unused once its creator ended: removed
 
 
+@contextlib.contextmanager
+def mapped_in_namespace(prefix: list[str], path: str) -> Iterator[subprocess.Popen]:
+    """A process started under `prefix` (a namespace of its own) that has created and mapped
+    `path` (in the /dev/shm it sees); on the way out it is ended and this /dev/shm's file
+    removed (a failed assertion leaves no file behind)."""
+    other = subprocess.Popen([*prefix, sys.executable, "-c", SLOW_CREATOR, path, "0"],
+                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert other.stdout.readline() == "created\n"
+        assert other.stdout.readline() == "mapped\n"
+        yield other
+    finally:
+        other.kill()
+        other.wait()
+        if os.path.exists(path):
+            os.unlink(path)
+
+
 def test_a_file_of_the_same_name_in_another_dev_shm_does_not_keep_this_one(tmp_path,
                                                                           in_private_shm):
     """A process with a /dev/shm of its own maps a file of the same name: this /dev/shm's file
@@ -92,20 +111,11 @@ def test_a_file_of_the_same_name_in_another_dev_shm_does_not_keep_this_one(tmp_p
     name = f"fastrtps_clnn_test_{os.getpid()}_{tmp_path.name}"
     path = os.path.join(SHM, name)
     open(path, "w").close()
-    other = subprocess.Popen([*in_private_shm, sys.executable, "-c", SLOW_CREATOR, path, "0"],
-                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-    try:
-        assert other.stdout.readline() == "created\n"
-        assert other.stdout.readline() == "mapped\n"
+    with mapped_in_namespace(in_private_shm, path) as other:
         assert name in shm_files_of(other.pid)  # its own file, by the same name
         assert name not in shm_files_in_use()
         assert remove_unused_fast_dds_files({name}) == []
         assert not os.path.exists(path)
-    finally:
-        other.kill()
-        other.wait()
-        if os.path.exists(path):  # a failed assertion leaves no file behind
-            os.unlink(path)
 
 
 def test_a_process_in_another_mount_namespace_on_this_dev_shm_keeps_its_file(tmp_path):
@@ -118,20 +128,11 @@ def test_a_process_in_another_mount_namespace_on_this_dev_shm_keeps_its_file(tmp
         pytest.skip("no mount namespace can be made here")
     name = f"fastrtps_clnn_test_{os.getpid()}_{tmp_path.name}"
     path = os.path.join(SHM, name)
-    other = subprocess.Popen([*other_namespace, sys.executable, "-c", SLOW_CREATOR, path, "0"],
-                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-    try:
-        assert other.stdout.readline() == "created\n"
-        assert other.stdout.readline() == "mapped\n"
+    with mapped_in_namespace(other_namespace, path) as other:
         assert os.readlink(f"/proc/{other.pid}/ns/mnt") != os.readlink("/proc/self/ns/mnt")
         assert name in shm_files_in_use()
         assert remove_unused_fast_dds_files({name}) == []
         assert os.path.exists(path)
-    finally:
-        other.kill()
-        other.wait()
-        if os.path.exists(path):
-            os.unlink(path)
 
 
 # A listener as Fast DDS runs one: a thread named dds.shm.<port> with the port's file mapped.
