@@ -5,7 +5,6 @@ run's values in-process instead of a params file."""
 from __future__ import annotations
 
 import sys
-from typing import Callable
 
 import rclpy
 
@@ -19,11 +18,10 @@ from .nodes.trial_manager import TrialManagerNode
 from .rclpy_session import init_ros, spin_until_finished
 
 
-def run_composed(values: dict, with_environment: bool, namespace: str, interrupted: list[int],
-                 before_the_end: Callable[[], None]) -> tuple[int, str | None]:
+def run_composed(values: dict, with_environment: bool, namespace: str,
+                 interrupted: list[int]) -> tuple[int, str | None]:
     """Run the episode; returns the trial manager's exit status (or 128 + signal) and its
-    reason. `before_the_end` runs before the nodes are destroyed (run_all notes their shared
-    memory files then, which their end unmaps)."""
+    reason."""
     classes = [EncoderNode, RewardNode, AgentNode, TrialManagerNode]
     if with_environment:
         classes.insert(0, EnvironmentNode)
@@ -42,7 +40,6 @@ def run_composed(values: dict, with_environment: bool, namespace: str, interrupt
             return 128 + interrupted[0], None
         return manager.finished.result(), manager.exit_reason
     finally:
-        before_the_end()
         for node in nodes:
             close_node(node)
         rclpy.try_shutdown()

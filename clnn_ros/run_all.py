@@ -25,7 +25,6 @@ import shlex
 import shutil
 import signal
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -45,7 +44,7 @@ from .init_weights import OPTIMAL, episode_start
 from .process_signals import STOP_SIGNALS, catch_signals
 from .rosenv import domain_id_problem
 from .supervise import (NODES, Supervisor, fresh_summary, report_failure, run_separate, say,
-                        start_recorder, stop_recorder)
+                        start_recorder, stop_recorder, work_directory)
 
 # --env-node: a command starting with one of these runs with run_all's interpreter (its venv).
 PYTHON_NAMES = ("python", "python3")
@@ -232,22 +231,20 @@ def main(argv=None) -> int:
         return run(args, values, checkpoint, supervisor, namespace, environment, env_command,
                    interrupted)
     finally:
-        for problem in supervisor.close():
-            say(f"run_all: warning: {problem}")
+        supervisor.close()
 
 
 def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
         environment: str | None, env_command: list[str] | None, interrupted: list[int]) -> int:
     began = time.time()
-    with tempfile.TemporaryDirectory(prefix="clnn_ros_") as tmp:
-        supervisor.remove_if_killed(Path(tmp))
-        out = args.out or Path(tmp) / "out"
+    with work_directory() as tmp:
+        out = args.out or tmp / "out"
         values["out_dir"] = str(out.resolve())
         bag_path = None
         if not args.no_record:
             bag_path = (args.bag or default_bag_path(args.out)).resolve()
             try:
-                start_recorder(supervisor, {**values, "extra_nodes": ""}, bag_path, Path(tmp),
+                start_recorder(supervisor, {**values, "extra_nodes": ""}, bag_path, tmp,
                                namespace, args.env_node or args.env)
             except OSError as error:
                 print(f"run_all: error: cannot write the bag {bag_path}: {error}", file=sys.stderr)
@@ -263,9 +260,9 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
         if args.composed:
             from .composed import run_composed  # loads rclpy and the nodes
             status, reason = run_composed(values, environment is not None, namespace,
-                                          interrupted, supervisor.note_files)
+                                          interrupted)
         else:
-            status, failed = run_separate(supervisor, values, Path(tmp), env_command,
+            status, failed = run_separate(supervisor, values, tmp, env_command,
                                           namespace, interrupted, began, bag_path)
             reason = supervisor.children[TRIAL_MANAGER].own_error()
         if bag_path is not None:

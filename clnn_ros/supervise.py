@@ -5,20 +5,22 @@ even killed with SIGKILL.
 
 Each child gets a pipe on stdin that run_all never writes to (a node sees its end of file when
 run_all is gone: process_signals.EXIT_WITH_STDIN) and its stderr is read by a thread that passes
-each line on to run_all's stderr and keeps the last ones. The Fast DDS shared-memory files the
-children use are noted while they run, and removed after the end if no process uses them then
-(a killed process cannot remove its own): those of this run's processes, never another's. If
-run_all itself is killed, clnn_ros.shm_janitor does that after the children have ended.
+each line on to run_all's stderr and keeps the last ones. The run's work directory is locked
+while run_all lives: one left by a killed run_all is removed by the next run_all.
 """
 
 from __future__ import annotations
 
+import fcntl
+import contextlib
 import json
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections import deque
@@ -29,9 +31,6 @@ from .graph.fields import COMPLETED
 from .graph.names import GRAPH_NODES, RECORDER, TRIAL_MANAGER
 from .graph.run import node_arguments, write_params
 from .process_signals import EXIT_WITH_STDIN, SHOW_STACKS
-from .rosenv import (SHM_CLEANED_BY_SUPERVISOR, deafness, own_fast_dds_files,
-                     remove_files_of_dead_process, remove_unused_fast_dds_files,
-                     written_fast_dds_files)
 
 NODES = (*GRAPH_NODES, TRIAL_MANAGER)
 # After the episode ends or Ctrl-C, how long the nodes get to exit by themselves, and then the
@@ -45,7 +44,6 @@ _STDERR = threading.Lock()
 # never acknowledges) and its participant's deletion.
 TERMINATE_S = 5.0
 STACKS_S = 0.5  # for a child's stacks (SHOW_STACKS) to reach its stderr
-SAMPLE_S = 0.5  # how often the children's shared-memory files are noted
 # "<prog>: error: <message>" (the project's one-line errors) or a ROS log line at ERROR.
 OWN_ERROR = re.compile(r"^(?:\S+: error: |\[ERROR\] \[[\d.]+\] \[[^\]]+\]: )(.*)$")
 
@@ -97,7 +95,6 @@ class Child:
         self.name = name
         self.shows_stacks = shows_stacks  # on SHOW_STACKS (process_signals.catch_signals)
         self.tail = deque(maxlen=TAIL_LINES)
-        self.shm_files: set[str] = set()  # its own Fast DDS files, noted while it runs
         self.process = subprocess.Popen(command, stdin=subprocess.PIPE, stderr=subprocess.PIPE,
                                         env=env)
         self._reader = threading.Thread(target=self._pass_stderr, daemon=True,
@@ -160,72 +157,21 @@ class Child:
 
 
 class Supervisor:
-    """The children of one run, the Fast DDS files they own or write to (and run_all's)."""
+    """The children of one run."""
 
     def __init__(self):
         self.children: dict[str, Child] = {}
-        self.shm_files: set[str] = set()
-        self._janitor = subprocess.Popen([sys.executable, "-m", "clnn_ros.shm_janitor"],
-                                         stdin=subprocess.PIPE, text=True, start_new_session=True)
-        self._janitor_lock = threading.Lock()
-        self._noting = threading.Lock()
-        self._stop_sampling = threading.Event()
-        self._sampler = threading.Thread(target=self._sample, daemon=True, name="shm-sampler")
-        self._sampler.start()
 
     def start(self, name: str, command: list[str], env: dict, shows_stacks: bool = False) -> Child:
         """A child; `shows_stacks`: it prints its stacks on SHOW_STACKS (a node of this package,
         not an --env-node command of one's own, on which the signal could end the process)."""
         self.children[name] = child = Child(name, command, env, shows_stacks)
-        self._tell_janitor(f"pid {child.process.pid}")
         return child
 
-    def remove_if_killed(self, directory: Path) -> None:
-        """Have the janitor remove `directory` (run_all's work directory) if run_all is killed."""
-        self._tell_janitor(f"dir {directory}")
-
-    def _tell_janitor(self, *lines: str, last: bool = False) -> None:
-        with self._janitor_lock:  # the sampler thread and the main thread both tell it
-            try:
-                self._janitor.stdin.write("".join(line + "\n" for line in lines))
-                self._janitor.stdin.flush()
-                if last:
-                    self._janitor.stdin.close()
-            except OSError:
-                pass  # it died: run_all's own close still cleans up
-
-    def _sample(self) -> None:
-        while not self._stop_sampling.wait(SAMPLE_S):
-            self.note_files()
-
-    def note_files(self) -> None:
-        """Note the Fast DDS files that run_all and its running children own or write to (every
-        SAMPLE_S, and by run_all before its own nodes end: a port written to for less than
-        SAMPLE_S could be missed)."""
-        with self._noting:  # the sampler thread and the main thread
-            known = set(self.shm_files)
-            self.shm_files |= own_fast_dds_files(os.getpid()) | written_fast_dds_files(os.getpid())
-            for child in list(self.children.values()):
-                if child.process.poll() is None:
-                    child.shm_files |= own_fast_dds_files(child.process.pid)
-                    self.shm_files |= child.shm_files | written_fast_dds_files(child.process.pid)
-            self._tell_janitor(*(f"file {name}" for name in sorted(self.shm_files - known)))
-
     def first_failure(self, exclude: set[str]) -> Child | None:
-        """A child (not in `exclude`) that exited with a non-zero status or a signal. Its own
-        Fast DDS files are removed at once if a signal killed it (it could not)."""
-        failed = next((c for name, c in self.children.items() if name not in exclude
-                       and c.returncode not in (None, 0)), None)
-        if failed is not None:
-            self.release(failed)
-        return failed
-
-    @staticmethod
-    def release(child: Child) -> None:
-        """Remove the own Fast DDS files of a child that a signal killed (it could not)."""
-        if child.returncode is not None and child.returncode < 0:
-            for problem in remove_files_of_dead_process(child.shm_files):
-                say(f"run_all: warning: {problem}")
+        """A child (not in `exclude`) that exited with a non-zero status or a signal."""
+        return next((c for name, c in self.children.items() if name not in exclude
+                     and c.returncode not in (None, 0)), None)
 
     def stop(self, names: list[str], grace_s: float, interrupt: bool) -> list[tuple[str, str]]:
         """Stop these children: told with SIGTERM first if `interrupt` (a node takes it as it
@@ -243,8 +189,6 @@ class Supervisor:
         for child, grace in zip(chosen, graces):
             if child.wait_while(lambda: grace.elapsed() < grace_s):
                 continue
-            if deaf := deafness(child.process.pid, f"node {child.name}"):  # it heard nothing
-                say(f"run_all: {deaf}")
             if child.shows_stacks:  # where it hangs, in the run's log
                 say(f"run_all: node {child.name} is slow to exit; the stacks of its threads:")
                 child.signal(SHOW_STACKS)
@@ -258,24 +202,42 @@ class Supervisor:
             child.wait(5.0)
         return forced
 
-    def close(self) -> list[str]:
-        """After every child ended: remove the Fast DDS files of the run (its processes' own,
-        and the peers' ports they wrote to) that no process uses.
-        Returns the problems (files that could not be removed), one line each."""
-        self._stop_sampling.set()
-        self._sampler.join(timeout=2.0)
+    def close(self) -> None:
         for child in self.children.values():
             child.close()
-        problems = remove_unused_fast_dds_files(self.shm_files)
-        self._tell_janitor("done", last=True)
-        self._janitor.wait()
-        return problems
+
+
+WORKDIR_PREFIX = "clnn_ros_run_"
+_WORKDIR_LOCK = ".owner.lock"
+
+
+@contextlib.contextmanager
+def work_directory():
+    """A run's temporary directory, removed at the end; locked (flock) while this process lives,
+    so that one left by a killed run_all (SIGKILL runs no clean-up) is known by its free lock
+    and removed here. The lock is taken before the lock file gets its name: a directory without
+    it is one still being set up."""
+    for abandoned in Path(tempfile.gettempdir()).glob(f"{WORKDIR_PREFIX}*/{_WORKDIR_LOCK}"):
+        try:
+            with open(abandoned) as lock:
+                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                shutil.rmtree(abandoned.parent, ignore_errors=True)
+        except OSError:
+            continue  # its run_all lives (or it is another user's)
+    directory = Path(tempfile.mkdtemp(prefix=WORKDIR_PREFIX))
+    with open(directory / "setting_up", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        os.rename(directory / "setting_up", directory / _WORKDIR_LOCK)
+        try:
+            yield directory
+        finally:
+            shutil.rmtree(directory, ignore_errors=True)
 
 
 # --- the graph's processes -------------------------------------------------------------
 
 def child_environment() -> dict:
-    return {**os.environ, EXIT_WITH_STDIN: "1", SHM_CLEANED_BY_SUPERVISOR: "1"}
+    return {**os.environ, EXIT_WITH_STDIN: "1"}
 
 
 def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
@@ -322,7 +284,6 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
         time.sleep(0.02)
     if status is None and manager.returncode is not None and manager.returncode < 0:
         failure = manager  # stopped from outside: it sent no EPISODE_END
-        supervisor.release(manager)
     # Ctrl-C reaches every process of the terminal's group: run_all's own handler has run long
     # before a child handled it and exited.
     if failure is not None and not interrupted:

@@ -65,7 +65,7 @@ if __name__ == "__main__":
         name=PACKAGE,
         version=ElementTree.parse(HERE / "package.xml").findtext("version"),
         packages=find_packages(include=[PACKAGE, f"{PACKAGE}.*"]),
-        package_data={PACKAGE: ["fastdds_profile.xml"]},
+        package_data={PACKAGE: ["fastdds_loopback.xml", "fastdds_subnet.xml"]},
         data_files=[
             ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
             (f"share/{PACKAGE}", ["package.xml"]),

@@ -115,12 +115,12 @@ def run_composed(values: dict, ticks_file: Path | None, profile_file: Path | Non
                  sim_time_everywhere: bool = False) -> int:
     from rclpy.parameter import Parameter
 
-    from clnn_ros.nodes.glue import NodeProcess, close_node
-    from clnn_ros.rclpy_session import spin_until_finished
+    from clnn_ros.nodes.glue import close_node
+    from clnn_ros.rclpy_session import ros_session, spin_until_finished
 
     sim_time = dict(parameter_overrides=[Parameter("use_sim_time", value=True)])
 
-    with NodeProcess([sys.argv[0]]) as process:
+    with ros_session([sys.argv[0]]) as signals:
         nodes = []
         try:
             for role in ("environment", "encoder", "reward", "agent", "trial_manager"):
@@ -130,15 +130,15 @@ def run_composed(values: dict, ticks_file: Path | None, profile_file: Path | Non
             times = TickTimes(manager) if ticks_file else None
             if profile_file:
                 profile_composed(manager, profile_file)
-            spin_until_finished(nodes, manager.finished, process.signals)
-            if process.signals:
-                return 128 + process.signals[0]
+            spin_until_finished(nodes, manager.finished, signals)
+            if signals:
+                return 128 + signals[0]
             if times is not None:
                 times.write(ticks_file)
             return manager.finished.result()
         finally:
             for node in nodes:
-                close_node(node, process.destroy)
+                close_node(node)
 
 
 def profile_composed(manager, profile_file: Path) -> None:

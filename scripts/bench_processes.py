@@ -13,6 +13,7 @@ from pathlib import Path
 
 from bench_settings import (OWN_TIME_ROLES, REPO, ROLES, RUN_TIMEOUT_S, SEED,
                             TEARDOWN_GRACE_S)
+from clnn_ros import rosenv
 
 NODE_ENTRY = REPO / "scripts" / "bench_node.py"
 BENCHMARK = REPO / "scripts" / "benchmark_graph.py"
@@ -71,18 +72,32 @@ class Bench:
     def __init__(self, sizes: dict, work: Path):
         self.sizes, self.work = sizes, work
         self.forced_ring_exits = 0
+        # Fast DDS's shared memory, as rmw_fastrtps adds it under LOCALHOST to a profile of the
+        # user's own (here the project's subnet profile: its lease, heartbeat and log): the
+        # project's default transport before 2026-12-05, measured beside today's UDP.
+        self.shm_profile = work / "shm_profile.xml"
+        self.shm_profile.write_text(rosenv.SUBNET_PROFILE.read_text())
+
+    def env(self, executor: str, transport: str = "udp") -> dict:
+        """The environment of a run's processes: rosenv's defaults (UDP on loopback), or
+        (`transport` "shm") shared memory and UDP."""
+        if transport == "udp":
+            return child_env(CLNN_ROS_EXECUTOR=executor)
+        return child_env(CLNN_ROS_EXECUTOR=executor, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+                         FASTRTPS_DEFAULT_PROFILES_FILE=self.shm_profile)
 
     def out_dir(self, name: str) -> Path:
         return self.work / f"{name}_{time.monotonic_ns()}"
 
     def graph_run(self, layout: str, executor: str, trials: int,
-                  profile: Path | None = None, sim_time_everywhere: bool = False) -> dict:
+                  profile: Path | None = None, sim_time_everywhere: bool = False,
+                  transport: str = "udp") -> dict:
         """One episode of the graph without the recorder, as `run_all --quiet --no-record`
         runs it (the run's values and node arguments from clnn_ros.graph.run; the trial manager
         started last); its summary.json, with the per-tick latencies in microseconds
         ("latency_us") unless profiled (`profile`: a file for the composed run, a folder of
         ROLE.prof for the node processes). `sim_time_everywhere`: OWN_TIME_ROLES started with
-        use_sim_time true as well."""
+        use_sim_time true as well. `transport`: Bench.env's."""
         from clnn_ros.graph.run import DEMO, node_arguments, run_values, write_params
 
         out = self.out_dir(f"graph_{layout}_{executor}")
@@ -107,7 +122,7 @@ class Bench:
                                  *(["-p", "use_sim_time:=true"]
                                    if sim_time_everywhere and role in OWN_TIME_ROLES else [])]
                         for role in ROLES]
-        run_group(commands, child_env(CLNN_ROS_EXECUTOR=executor), RUN_TIMEOUT_S)
+        run_group(commands, self.env(executor, transport), RUN_TIMEOUT_S)
         summary = json.loads((out / "summary.json").read_text())
         if summary["exit_reason"] != "completed":
             raise RuntimeError(f"graph run did not complete: {summary}")
@@ -120,33 +135,28 @@ class Bench:
             summary["latency_us"] = [(c - p) / 1e3 for p, c in zip(published, completed)]
         return summary
 
-    def ring_rate(self, layout: str, executor: str, msgs: str) -> dict:
+    def ring_rate(self, layout: str, executor: str, msgs: str, transport: str = "udp") -> dict:
         me = [sys.executable, str(BENCHMARK)]
         common = ["--ticks", str(self.sizes["ring_ticks"][layout, executor]), "--msgs", msgs]
         if layout == "composed":
             commands = [me + ["ring-composed", *common]]
         else:  # the trial manager last, as run_all starts it
             commands = [me + ["ring-stage", "--role", role, *common] for role in ROLES]
-        return self.run_ring(commands, child_env(CLNN_ROS_EXECUTOR=executor))
+        return self.run_ring(commands, self.env(executor, transport))
 
     def run_ring(self, commands: list[list[str]], env: dict) -> dict:
         """Run the ring's processes; the trial manager's (the last command's) RING_RESULT. A
         ring process that has not exited TEARDOWN_GRACE_S after the result is in (seen:
         rclpy/Fast DDS teardown hanging once in a while; the teardown is not measured) is
-        killed, its own Fast DDS shared-memory files removed, and counted in
-        self.forced_ring_exits."""
-        from clnn_ros.rosenv import own_fast_dds_files, remove_files_of_dead_process
-
+        killed and counted in self.forced_ring_exits."""
         base = self.out_dir("ring")
         outs = [base.with_name(f"{base.name}_{i}.out") for i in range(len(commands))]
         errs = [path.with_suffix(".err") for path in outs]
         procs = []
 
         def kill(p: subprocess.Popen) -> None:
-            names = own_fast_dds_files(p.pid)
             kill_group(p)
             p.wait()
-            remove_files_of_dead_process(names)
 
         def tail(i: int) -> str:
             return errs[i].read_text(errors="replace")[-2000:]

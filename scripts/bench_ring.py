@@ -114,9 +114,9 @@ def ring_result(tm, ticks: int) -> None:
 
 def ring_composed(a) -> int:
     """All five ring nodes in one process, one executor."""
-    from clnn_ros.nodes.glue import NodeProcess
+    from clnn_ros.rclpy_session import ros_session
     from clnn_ros.rclpy_session import make_executor
-    with NodeProcess([sys.argv[0]]) as process:
+    with ros_session([sys.argv[0]]):
         nodes = {role: ring_node(role, a.msgs, a.ticks) for role in ROLES}
         executor = make_executor()
         for node in nodes.values():
@@ -132,7 +132,7 @@ def ring_composed(a) -> int:
             ring_result(tm, a.ticks)
         executor.shutdown()
         for node in nodes.values():
-            process.destroy(node)
+            node.destroy_node()
     return 0 if ok else 1
 
 
@@ -141,11 +141,12 @@ def ring_stage(a) -> int:
     publisher and subscriptions have matched; the trial manager starts when all have, and
     ends the run with a latched stop message."""
     from rclpy.duration import Duration
-    from clnn_ros.nodes.glue import READY_QOS, NodeProcess
+    from clnn_ros.nodes.glue import READY_QOS
+    from clnn_ros.rclpy_session import ros_session
     from clnn_ros.rclpy_session import make_executor
     from std_msgs.msg import String
 
-    with NodeProcess([sys.argv[0]]) as process:
+    with ros_session([sys.argv[0]]):
         node = ring_node(a.role, a.msgs, a.ticks)
         executor = make_executor()
         executor.add_node(node)
@@ -181,5 +182,5 @@ def ring_stage(a) -> int:
                 executor.spin_once(timeout_sec=0.02 if not announced else 0.1)
             status = 0 if stopped else 1
         executor.shutdown()
-        process.destroy(node)
+        node.destroy_node()
     return status

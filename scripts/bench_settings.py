@@ -27,6 +27,10 @@ EXECUTOR_NAMES = {"events": "EventsExecutor", "single": "SingleThreadedExecutor"
 LAYOUT_NAMES = {"separate": "5 processes", "composed": "composed (1 process)"}
 # The graph / raw UInt64 ring targets (EventsExecutor) of the issue "Scale" (a leaner graph).
 TARGETS = {"separate": 0.75, "composed": 0.50}
+# The runs on Fast DDS's shared memory (the default before 2026-12-05), beside the same on UDP,
+# and the share of the shared-memory graph's ticks/s that the UDP graph keeps (issue 35).
+SHM = ("graph_shm", "uint64_shm")
+UDP_KEEPS = {"separate": 0.95, "composed": 0.95}
 # The 50 Hz run: the environment's period, the deadline of the agent's answer, the hogs.
 PERIOD_MS = 20.0
 DEADLINE_MS = 20.0

@@ -73,7 +73,7 @@ from bench_profile import profile_composed, profile_separate, serialization_cost
 from bench_report import percentiles, report
 from bench_ring import ring_composed, ring_stage
 from bench_settings import (DEADLINE_MS, EXECUTORS, FULL, LAYOUTS, PERIOD_MS, QUICK, REPO,
-                            ROLES)
+                            ROLES, SHM)
 
 
 def main_benchmark(a) -> int:
@@ -86,10 +86,11 @@ def main_benchmark(a) -> int:
     load_before = os.getloadavg()
     repeats = sizes["repeats"]
     # (layout, executor, what): the graph, the UInt64 ring, and with the EventsExecutor the typed
-    # ring and the graph with sim time in every node ("graph_sim")
+    # ring, the graph with sim time in every node ("graph_sim") and the graph and UInt64 ring
+    # on shared memory ("*_shm"; the others run on rosenv's default, UDP on loopback)
     configs = [(layout, executor, what) for executor in EXECUTORS for layout in LAYOUTS
-               for what in ("graph", "uint64", "typed", "graph_sim")
-               if not (what in ("typed", "graph_sim") and executor == "single")]
+               for what in ("graph", "uint64", "typed", "graph_sim", *SHM)
+               if not (what in ("typed", "graph_sim", *SHM) and executor == "single")]
     rates = {c: [] for c in configs}
     ticks, latencies = {}, {}
     spent = dict.fromkeys(EXECUTORS, 0.0)  # seconds of this run per executor's rows
@@ -101,15 +102,17 @@ def main_benchmark(a) -> int:
             for c in configs:
                 layout, executor, what = c
                 began = time.monotonic()
-                if what == "graph":
-                    s = bench.graph_run(layout, executor, sizes["graph_trials"][executor])
+                transport = "shm" if what in SHM else "udp"
+                if what in ("graph", "graph_shm"):
+                    s = bench.graph_run(layout, executor, sizes["graph_trials"][executor],
+                                        transport=transport)
                     ticks[c] = s["ticks"]
                     latencies.setdefault(c, []).extend(s["latency_us"])
                 elif what == "graph_sim":
                     s = bench.graph_run(layout, executor, sizes["graph_trials"][executor],
                                         sim_time_everywhere=True)
                 else:
-                    s = bench.ring_rate(layout, executor, what)
+                    s = bench.ring_rate(layout, executor, what.removesuffix("_shm"), transport)
                 rates[c].append(s["ticks_per_s"])
                 spent[executor] += time.monotonic() - began
                 print(f"  run {rep + 1}/{repeats}: {layout:9s} {executor:7s} {what:7s} "
@@ -122,9 +125,11 @@ def main_benchmark(a) -> int:
                            ticks=ticks[(layout, executor, "graph")],
                            latency=percentiles(latencies[(layout, executor, "graph")]),
                            samples=len(latencies[(layout, executor, "graph")]))
-                for what in ("graph", "uint64", "typed", "graph_sim"):
+                for what in ("graph", "uint64", "typed", "graph_sim", *SHM):
                     r = rates.get((layout, executor, what), [])
                     row[what] = (max(r), r) if r else None
+                if (layout, executor, "graph_shm") in latencies:
+                    row["latency_shm"] = percentiles(latencies[layout, executor, "graph_shm"])
                 rows.append(row)
         paced = []
         for hogs in (0, HOGS):

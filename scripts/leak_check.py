@@ -3,15 +3,15 @@
     python scripts/leak_check.py [--runs 20] [--trials 2] [--max-steps 300]
 
 Part 1, separate processes: `--runs` runs of `python -m clnn_ros.run_all` (five nodes and the
-recorder each), one after the other. After each run: no process of the run is left, no new Fast
-DDS shared-memory file is left in /dev/shm, and the bag is complete.
+recorder each), one after the other. After each run: no process of the run is left, no Fast DDS
+shared-memory file is new in /dev/shm (the project's DDS runs over UDP), and the bag is complete.
 Part 2, one process: `--runs` composed episodes (`run_all --composed`) in this Python process.
 Its open file descriptors must not grow at all after the first run, and its resident memory
 must not grow by more than RSS_BOUND_MB from the second run to the last.
 
 Prints a table and one verdict line; exit status 0 if nothing leaked, 1 otherwise. Other DDS
-users of the machine that get killed leave /dev/shm files too; to count only this check's, give
-it a private /dev/shm (tests/test_leaks.py does):
+users of the machine make /dev/shm files too; to count only this check's, give it a private
+/dev/shm (tests/test_leaks.py does):
     unshare --mount sh -c 'mount -t tmpfs tmpfs /dev/shm && python scripts/leak_check.py'
 """
 
@@ -25,7 +25,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from clnn_ros.rosenv import fast_dds_shm_files, processes_with_env, unused_fast_dds_files
+from clnn_ros.rosenv import processes_with_env
 
 RSS_BOUND_MB = 20.0  # allowed resident-memory growth over the in-process runs (allocator noise)
 
@@ -41,6 +41,10 @@ def open_fds() -> int:
     return len(os.listdir("/proc/self/fd"))
 
 
+def fast_dds_shm_files() -> set[str]:
+    return {name for name in os.listdir("/dev/shm") if "fastrtps_" in name}
+
+
 def separate_runs(runs: int, episode: list[str], workdir: Path) -> list[str]:
     problems, forced = [], []
     shm_before = fast_dds_shm_files()
@@ -51,7 +55,7 @@ def separate_runs(runs: int, episode: list[str], workdir: Path) -> list[str]:
                                  str(out)], env={**os.environ, "CLNN_LEAK_RUN": str(out)},
                                 capture_output=True, text=True, timeout=120)
         left = processes_with_env("CLNN_LEAK_RUN", str(out))
-        new_shm = unused_fast_dds_files() - shm_before  # new, and used by no process
+        new_shm = fast_dds_shm_files() - shm_before
         print(f"process run {run + 1:2d}: exit {result.returncode}, "
               f"{time.monotonic() - started:5.1f} s, processes left {len(left)}, "
               f"new /dev/shm files {len(new_shm)}", flush=True)

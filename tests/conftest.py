@@ -34,9 +34,7 @@ def pytest_collection_modifyitems(items):
 @pytest.fixture(scope="session")
 def in_private_shm() -> list[str]:
     """A command prefix that runs a command with a /dev/shm of its own (only its files are
-    there), or [] where mount namespaces are not allowed: then the shared /dev/shm is used and
-    a file left over is one that is new and unused. (No test removes shared memory itself:
-    run_all removes its own processes' files, never another's.)"""
+    there), or [] where mount namespaces are not allowed."""
     prefix = ["unshare", "--mount", "sh", "-c", 'mount -t tmpfs tmpfs /dev/shm && exec "$@"', "_"]
     allowed = subprocess.run([*prefix, "true"], capture_output=True).returncode == 0
     return prefix if allowed else []
@@ -75,32 +73,15 @@ def problem_lines(stderr: str) -> list[str]:
             and not HUNG_IN_NATIVE.match(line) and not STACKS.match(line)]
 
 
-# Fast DDS gives each participant, besides its domain's ports (7400 + 250 x domain and up), one
-# port numbered from 7000 that is free on the whole machine, whatever the domain (measured: two
-# runs on domains 81 and 82 held 7000 and 7001). Once a participant ends, another test's new
-# one may create that port again at any moment, unmapped for an instant.
-MACHINE_WIDE_PORT = re.compile(r"fastrtps_port7[0-3]\d\d(_|$)")
+# The two wait files of LTTng (lttng-ust-wait-6, lttng-ust-wait-6-<uid>): every process that
+# loads ROS's tracetools (rclpy does) maps them, and LTTng keeps them for the next one; the
+# only files in /dev/shm that a run or test of the project makes (DDS runs over UDP).
+LTTNG_WAIT = re.compile(r"lttng-ust-wait-\d+(-\d+)?")
 
 
-# On a loaded machine a participant's wait for the lock of such a port can time out (2 s,
-# eProsima/Fast-DDS#6117): Fast DDS logs an Error (to stderr: fastdds_profile.xml) and the
-# participant works on (CI: the echo that logged it printed its message right).
-PORT_LOCK_TIMEOUT = re.compile(r"\S+ \S+ \[RTPS_TRANSPORT_SHM Error\] Failed init_port "
-                               r"fastrtps_port\d+: open_and_lock_file failed -> Function "
-                               r"open_port_internal")
-TERMINAL_COLOR = re.compile(r"\x1b\[[\d;]*m")
-
-
-def without_port_lock_timeouts(stderr: str) -> str:
-    """A process's standard error less Fast DDS's lines for a timed-out port lock."""
-    return "".join(line for line in stderr.splitlines(keepends=True)
-                   if not PORT_LOCK_TIMEOUT.fullmatch(TERMINAL_COLOR.sub("", line).rstrip("\n")))
-
-
-def files_no_other_test_makes(names: set[str]) -> set[str]:
-    """Fast DDS files of a test's participants that no other test's can create: segments (a
-    GUID each) and the ports of the test's own domain."""
-    return {name for name in names if not MACHINE_WIDE_PORT.search(name)}
+def not_lttng(names) -> list[str]:
+    """Those of these /dev/shm file names that are not LTTng's wait files."""
+    return sorted(name for name in names if not LTTNG_WAIT.fullmatch(name))
 
 
 # A bound against a hang, never a speed bound: a graph's start and end took over 60 s beside a

@@ -31,7 +31,6 @@ from clnn_ros.core.params import ParamError, Params, params_from_strings
 from clnn_ros.core.physics import CartPole
 from clnn_ros.graph.names import RECORDER
 from clnn_ros.graph.run import ENVIRONMENT_GIVEN
-from clnn_ros.rosenv import domain_port_files, unused_fast_dds_files
 
 from conftest import HANG_S, assert_run_equals_episode, free_domain_id
 
@@ -105,14 +104,6 @@ def test_checker(checks, name):
             len(RULES) + (name == "cartpole"), report
     if name == "default_cart_mass":
         assert "it steps cart_mass 0.711 kg (the default), not the run's 0.9" in report, report
-
-
-@pytest.mark.ros
-def test_the_checks_leave_no_port_of_their_domain(checks):
-    """A check's harness re-creates the port of a checked node that removed it on its way out,
-    so each check removes its domain's unused ports at its end (before, 2-4 were left after
-    every test suite, all of this module's cart-pole check)."""
-    assert not unused_fast_dds_files(domain_port_files(int(DOMAIN_ID)))
 
 
 def steps_of(cartpole: CartPole, directions) -> list:

@@ -20,14 +20,11 @@ import pytest
 from clnn_ros.graph import names
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
-from clnn_ros.rosenv import (fast_dds_shm_files, own_fast_dds_files,
-                             remove_unused_fast_dds_files, unused_fast_dds_files)
 
 from test_graph import processes_with, wait_for_line
 from test_recording import assert_every_tick, child, raw_messages, start_run
 
-from conftest import (HANG_S, files_no_other_test_makes, free_domain_id, problem_lines,
-                      ros_environment)
+from conftest import HANG_S, free_domain_id, problem_lines, ros_environment
 
 pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 DOMAIN_ID = free_domain_id()
@@ -178,64 +175,33 @@ def test_a_node_that_fails_at_start_ends_the_run_at_once(ros_env, tmp_path, comm
     assert not processes_with(str(tmp_path))
 
 
-@pytest.mark.parametrize("composed", [False, True], ids=["processes", "composed"])
-def test_the_port_of_a_killed_listener_is_removed_with_the_run(ros_env, tmp_path, composed):
-    """A participant of no run (here clnn_ros.echo on the state) killed while the environment
-    writes to it leaves its Fast DDS ports; the run's processes wrote to them, so the run
-    removes them once it ended and no process uses them. (So also a port that a peer leaving
-    the graph removed while a node opened it to send, which the node re-creates:
-    docs/ROS_GRAPH.md.)"""
-    process = start_run(ros_env, tmp_path, "--no-record", *(["--composed"] if composed else []))
-    try:
-        wait_for_line(process.stdout, "trial    2/")
-        echo = subprocess.Popen([sys.executable, "-m", "clnn_ros.echo",
-                                 names.absolute(names.STATE)],
-                                env={**ros_env, "CLNN_TEST_RUN": str(tmp_path)},
-                                stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-        wait_for_line(echo.stdout, "---")  # it receives: the environment writes to its port
-        echos = own_fast_dds_files(echo.pid) & fast_dds_shm_files()
-        ports = {name for name in files_no_other_test_makes(echos) if "fastrtps_port" in name}
-        echo.kill()
-        echo.wait(timeout=30)
-        assert ports and ports <= fast_dds_shm_files()  # a killed process removes nothing
-        wait_for_line(process.stdout, "trial    4/")
-    finally:
-        os.killpg(process.pid, signal.SIGINT)
-        _, stderr = process.communicate(timeout=HANG_S)
-    assert process.returncode == 130, stderr[-3000:]
-    left = unused_fast_dds_files(ports)
-    assert not left, sorted(left)
-    assert not remove_unused_fast_dds_files(echos)  # its segments: the run never mapped them
-
-
-def test_killing_run_all_ends_its_children(ros_env, tmp_path, in_private_shm):
+def test_killing_run_all_ends_its_children(ros_env, tmp_path):
     """SIGKILL of run_all: its nodes end (stdin's end of file), the recorder finishes the bag,
-    and clnn_ros.shm_janitor removes the Fast DDS files they leave (listed, where allowed, in a
-    /dev/shm of the run's own once every process of the run has ended) and run_all's work
-    directory (in a temp folder of the run's own)."""
+    and the work directory it could not remove (in a temp folder of the test's own) is removed
+    by the next run_all, whose own is removed at its end."""
     temp = tmp_path / "temp"
     temp.mkdir()
-    marker = {**ros_env, "CLNN_TEST_RUN": str(tmp_path), "LISTING": str(tmp_path / "shm.txt"),
-              "TMPDIR": str(temp)}
-    shm_before = fast_dds_shm_files()
+    marker = {**ros_env, "CLNN_TEST_RUN": str(tmp_path), "TMPDIR": str(temp)}
     process = subprocess.Popen(
-        [*in_private_shm, sys.executable, str(Path(__file__).with_name("shm_listing.py")),
-         sys.executable, "-m", "clnn_ros.run_all", "--seed", "1", "--trials", "400", "--out",
-         str(tmp_path)], env=marker, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        [sys.executable, "-m", "clnn_ros.run_all", "--seed", "1", "--trials", "400", "--out",
+         str(tmp_path / "killed")], env=marker, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True)
     wait_for_line(process.stdout, "trial    2/")
-    # run_all, 5 nodes, the recorder, the janitor and the listing script
-    assert len(processes_with(str(tmp_path))) == 9
-    os.kill(int((tmp_path / "shm.txt.pid").read_text()), signal.SIGKILL)
+    assert len(processes_with(str(tmp_path))) == 7  # run_all, 5 nodes and the recorder
+    process.kill()
     _, stderr = process.communicate(timeout=120)
+    deadline = time.monotonic() + HANG_S
+    while processes_with(str(tmp_path)) and time.monotonic() < deadline:
+        time.sleep(0.1)
     assert not processes_with(str(tmp_path))
-    assert raw_messages(tmp_path / "bag")  # the recorder finished the bag on its way out
-    if in_private_shm:
-        left = {name for name in (tmp_path / "shm.txt").read_text().split() if "fastrtps" in name}
-    else:  # a file of this run left over is new and used by no process
-        left = unused_fast_dds_files() - shm_before
-    assert not left, sorted(left)
-    assert not list(temp.iterdir())
+    assert raw_messages(tmp_path / "killed" / "bag")  # the recorder finished the bag
     assert "Traceback" not in stderr, stderr
+    assert len(list(temp.iterdir())) == 1  # the killed run's work directory
+    after = subprocess.run([sys.executable, "-m", "clnn_ros.run_all", "--trials", "1",
+                            "--no-record", "--quiet"], env=marker, capture_output=True,
+                           text=True, timeout=HANG_S)
+    assert after.returncode == 0, after.stderr
+    assert not list(temp.iterdir())
 
 
 def test_a_second_graph_on_the_same_domain_and_namespace_is_refused(ros_env, tmp_path):

@@ -259,7 +259,8 @@ def test_colcon_builds_the_package_into_an_install_tree(tmp_path):
     assert (install / "share" / "clnn_ros" / "launch" / "graph.launch.py").is_file()
     assert (install / "share" / "ament_index" / "resource_index" / "packages" / "clnn_ros").is_file()
     site = next((install / "lib").glob("python3*/site-packages"))
-    assert (site / "clnn_ros" / "fastdds_profile.xml").is_file()
+    assert (site / "clnn_ros" / "fastdds_loopback.xml").is_file()
+    assert (site / "clnn_ros" / "fastdds_subnet.xml").is_file()
     # the executables run the installed code (as `ros2 run` would, with this venv's ROS)
     run_env = {**os.environ, "PYTHONPATH": str(site)}
     agent = subprocess.run([sys.executable, str(install / "lib" / "clnn_ros" / "agent"), "x"],

@@ -28,8 +28,6 @@ from ..graph import qos
 from ..graph.fields import tick_stamp
 from ..graph.names import ACTION, CLOCK, READY, STATE, TRIAL_EVENT
 from ..rclpy_session import qos_profile
-from ..rosenv import (domain_port_files, remove_unused_fast_dds_files,
-                      written_fast_dds_files)
 from .rules import FORCE_N, NAME, TAU_NS
 
 LOCKSTEP_QOS = qos_profile(qos.LOCKSTEP)
@@ -88,11 +86,8 @@ class Probe:
     @contextmanager
     def session(self) -> Iterator[Probe]:
         """The harness node on an executor of its own context (not sys.argv: the checked
-        command's own --ros-args are not the checker's); on the way out the process is stopped,
-        the context shut down, and the Fast DDS files the harness wrote to or of the check's
-        domain that no process uses any more removed: the harness sends to each process it
-        starts and re-creates the port of one that removed it on its way out, also after it
-        noted what it writes to (two ports of the domain were left by every check, measured)."""
+        command's own --ros-args are not the checker's); on the way out the process is stopped
+        and the context shut down."""
         context = rclpy.Context()
         rclpy.init(args=[sys.argv[0]], context=context, domain_id=self.domain_id)
         self.node = Harness(context, self.namespace)
@@ -103,10 +98,8 @@ class Probe:
                 yield self
             finally:
                 self.stop_process()
-                written = written_fast_dds_files(os.getpid())
                 self.node.destroy_node()
                 rclpy.try_shutdown(context=context)
-                remove_unused_fast_dds_files(written | domain_port_files(self.domain_id))
 
     def start_process(self) -> None:
         """The command as run_all starts it: the run's ROS arguments appended, a pipe on stdin

@@ -29,8 +29,6 @@ from ..graph.run import (DESCRIPTIONS, declared_values, node_parameters, read_pa
                          names_list)
 from ..graph.watch import claim_order, graph_claim
 from ..rclpy_session import qos_profile, ros_session, spin_until_finished, split_ros_arguments
-from ..rosenv import (SHM_CLEANED_BY_SUPERVISOR, deafness, remove_unused_fast_dds_files,
-                      written_fast_dds_files)
 
 LOCKSTEP_QOS = qos_profile(qos.LOCKSTEP)
 READY_QOS = qos_profile(qos.READY)
@@ -189,13 +187,6 @@ class GraphClaim:
         self.on_other(other < claim_order(self.claim))
 
 
-def own_deafness() -> str:
-    """"; ..." if this process listens on shared-memory ports whose files were removed under it
-    (rosenv.deafness): then it heard nothing sent there, and it is to blame."""
-    deaf = deafness(os.getpid(), "this node")
-    return f"; {deaf}" if deaf else ""
-
-
 def deliver_published(node: Node) -> None:
     """Wait (ACK_WAIT_S at most in all) until every subscriber has acknowledged what the node
     published: what a lagging subscriber (the recorder) has not received yet is lost with the
@@ -205,39 +196,6 @@ def deliver_published(node: Node) -> None:
         remaining = deadline - time.monotonic()
         if remaining <= 0 or not publisher.wait_for_all_acked(Duration(seconds=remaining)):
             return
-
-
-class NodeProcess:
-    """A graph node's process: its rclpy session (rclpy_session.ros_session; `signals` are the
-    signals received) and, after its end, the removal of the Fast DDS files it wrote to that no
-    process uses any more. A peer that left while this process still sent to it (a killed one,
-    or one whose port this process re-created as it was removed) leaves its files behind, and
-    nobody else may be there to clean up (ros2 launch, a node started by hand); under run_all
-    (rosenv.SHM_CLEANED_BY_SUPERVISOR) run_all removes them."""
-
-    def __init__(self, argv: list[str]):
-        self._session = ros_session(argv)
-        self._cleans_up = os.environ.get(SHM_CLEANED_BY_SUPERVISOR) != "1"
-        self._written: set[str] = set()
-        self.signals: list[int] = []
-
-    def __enter__(self) -> NodeProcess:
-        self.signals = self._session.__enter__()
-        return self
-
-    def destroy(self, node: Node) -> None:
-        """Destroy the node, noting first the files this process writes to: they are mapped
-        only while its DDS participant lives, and rclpy ends it with the process's last node."""
-        if self._cleans_up:
-            self._written |= written_fast_dds_files(os.getpid())
-        node.destroy_node()
-
-    def __exit__(self, *exc_info) -> None:
-        try:
-            self._session.__exit__(*exc_info)
-        finally:
-            if self._written:
-                remove_unused_fast_dds_files(self._written)
 
 
 def run_node(make_node: Callable[[dict], Node], argv: list[str] | None = None,
@@ -255,15 +213,15 @@ def run_node(make_node: Callable[[dict], Node], argv: list[str] | None = None,
         print(f"{prog}: error: unexpected arguments {unexpected}: a node takes ROS arguments "
               f"only, after --ros-args", file=sys.stderr)
         return 2
-    with NodeProcess(argv) as process:
+    with ros_session(argv) as signals:
         try:
             node = make_node(given_parameters(argv))
         except ParamError as error:
             print(f"{prog}: error: {error}", file=sys.stderr)
             return 2
         try:
-            spin_until_finished([node], node.finished, process.signals)
-            if process.signals:  # a requested shutdown is no failure (as ROS 2's own nodes)
+            spin_until_finished([node], node.finished, signals)
+            if signals:  # a requested shutdown is no failure (as ROS 2's own nodes)
                 if on_interrupt is not None:
                     on_interrupt(node)
                 return 0
@@ -271,15 +229,15 @@ def run_node(make_node: Callable[[dict], Node], argv: list[str] | None = None,
                 print(f"{prog}: error: {node.failure}", file=sys.stderr, flush=True)
             return node.finished.result()
         finally:
-            close_node(node, process.destroy)
+            close_node(node)
 
 
-def close_node(node: Node, destroy: Callable[[Node], None] = Node.destroy_node) -> None:
+def close_node(node: Node) -> None:
     """Log what the node refused, let its last messages reach their subscribers, destroy it."""
     if summary := node.refusals.summary():
         node.get_logger().warning(summary)
     deliver_published(node)
-    destroy(node)
+    node.destroy_node()
 
 
 def use_sim_time(node: Node, role: str) -> None:

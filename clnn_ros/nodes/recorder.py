@@ -45,9 +45,9 @@ from ..graph.names import (CLOCK, INPUT_LABELS, OPTIONAL, PER_TICK, RECORDED, RE
                            TOPIC_TYPES, TRIAL_EVENT)
 from ..graph.fields import tick_nanoseconds
 from ..graph.ticks import TICKS_RECORD, TickRanges
-from ..rclpy_session import WithMessageInfo, qos_profile, spin_until_finished
+from ..rclpy_session import WithMessageInfo, qos_profile, ros_session, spin_until_finished
 from .glue import (LABELS_QOS, PROGRESS_QOS, Readiness, declare_run_parameters,
-                   given_parameters, NodeProcess, steady_clock, use_sim_time)
+                   given_parameters, steady_clock, use_sim_time)
 
 RECORD_QOS = qos_profile(qos.RECORD)
 LINGER_S = 0.3      # after EPISODE_END: wait for messages still in flight on other topics
@@ -226,7 +226,7 @@ class RecorderNode(Node):
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv if argv is None else argv
-    with NodeProcess(argv) as process:
+    with ros_session(argv) as signals:
         try:
             node = RecorderNode(given_parameters(argv))
         except ParamError as error:
@@ -237,8 +237,8 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         status = 1
         try:
-            spin_until_finished([node], node.finished, process.signals)
-            status = 0 if process.signals else node.finished.result()  # a requested stop: 0
+            spin_until_finished([node], node.finished, signals)
+            status = 0 if signals else node.finished.result()  # a requested stop: 0
         finally:
             print(f"recorder: {node.close()}", flush=True)
             if node.failure:
@@ -247,7 +247,7 @@ def main(argv: list[str] | None = None) -> int:
             if missing := node.missing():
                 print(f"recorder: warning: {missing} messages of per-tick topics never "
                       f"arrived (gaps in the ticks)", file=sys.stderr, flush=True)
-            process.destroy(node)
+            node.destroy_node()
         return status
 
 

@@ -52,7 +52,7 @@ from ..graph.run import NODE_PARAMETERS, names_list
 from ..graph.watch import another_graph, describe_foreign, foreign_publishers, gone, named_twice
 from ..init_weights import episode_start
 from .glue import (LOCKSTEP_QOS, PROGRESS_QOS, READY_QOS, GraphClaim, Readiness, checked,
-                   declare_run_parameters, endpoints_matched, own_deafness, run_node,
+                   declare_run_parameters, endpoints_matched, run_node,
                    steady_clock, use_sim_time)
 
 WATCHDOG_S = 0.1
@@ -188,7 +188,7 @@ class TrialManagerNode(Node):
             return
         self.stalled_s += running
         if self.stalled_s > self.settings["stall_timeout_s"]:
-            self.stop(1, self.stall_reason() + own_deafness())
+            self.stop(1, self.stall_reason())
 
     def graph_problem(self) -> str | None:
         """Another graph of the same names (before the start: the run is abandoned); a second
