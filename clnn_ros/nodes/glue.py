@@ -175,15 +175,22 @@ class GraphClaim:
         self.on_other, self._others, self._log = on_other, set(), node.get_logger()
         self._publisher = node.create_publisher(String, CLAIM, CLAIM_QOS)
         self._publisher.publish(String(data=self.claim))
-        node.create_subscription(String, CLAIM, self._receive, CLAIM_QOS)
+        self._subscription = node.create_subscription(String, CLAIM, self._receive, CLAIM_QOS)
+
+    def awaited(self) -> bool:
+        """Whether another graph's claim is on its way: its publisher matched (its own one
+        aside), its claim not in yet. A trial manager waits for it before its first tick: on
+        UDP under load the other graph's lockstep messages flowed seconds before its claim (and
+        its node names), and a graph that started meanwhile ran mixed with it."""
+        return self._subscription.get_publisher_count() > 1 + len(self._others)
 
     def _receive(self, msg: String) -> None:
         if msg.data == self.claim or msg.data in self._others:
             return
+        self._others.add(msg.data)  # heard, whatever it says: awaited() no longer waits for it
         if (other := claim_order(msg.data)) is None:
             self._log.error(f"refused {CLAIM}: {msg.data[:80]!r} is no claim")
             return
-        self._others.add(msg.data)
         self.on_other(other < claim_order(self.claim))
 
 

@@ -250,7 +250,7 @@ class TrialManagerNode(Node):
 
     def check_start(self, now: float, running: float) -> None:
         missing = self.expected - self.ready
-        if not missing and self.matched():
+        if not missing and self.matched() and not self.claim.awaited():
             self.started_at = now
             self.advance(0, starts_trial=True)
             return
@@ -265,7 +265,9 @@ class TrialManagerNode(Node):
                              f" s (start it yourself: docs/ENV_CONTRACT.md)")
         elif now - self.last_note >= WAITING_NOTE_S:
             self.last_note = now
-            self.get_logger().warning(f"waiting for {', '.join(sorted(missing)) or 'matching'}")
+            self.get_logger().warning(f"waiting for {', '.join(sorted(missing)) or 'matching'}"
+                                      + (" and another graph's claim" if self.claim.awaited()
+                                         else ""))
 
     def stall_reason(self) -> str:
         """The node whose message for the current tick is missing, first in the chain."""
