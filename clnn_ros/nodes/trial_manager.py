@@ -265,9 +265,7 @@ class TrialManagerNode(Node):
                              f" s (start it yourself: docs/ENV_CONTRACT.md)")
         elif now - self.last_note >= WAITING_NOTE_S:
             self.last_note = now
-            self.get_logger().warning(f"waiting for {', '.join(sorted(missing)) or 'matching'}"
-                                      + (" and another graph's claim" if self.claim.awaited()
-                                         else ""))
+            self.get_logger().warning(f"waiting for {', '.join(sorted(missing)) or 'matching'}")
 
     def stall_reason(self) -> str:
         """The node whose message for the current tick is missing, first in the chain."""
