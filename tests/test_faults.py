@@ -61,7 +61,7 @@ def test_killed_process_is_named_at_once_and_the_graph_comes_down(ros_env, tmp_p
     process = start_run(ros_env, tmp_path, "--stall-timeout", "30")
     stderr = ReadLines(process.stderr)
     try:
-        wait_for_line(process.stdout, "trial    2/")
+        wait_for_line(process.stdout, "trial    2/", errors=process.stderr)
     except AssertionError:
         os.killpg(process.pid, signal.SIGINT)
         pytest.fail(f"the run did not reach trial 2: {stderr.text()[-3000:]}")
@@ -89,7 +89,7 @@ def test_a_node_stopped_by_someone_else_is_named(ros_env, tmp_path):
     trial manager has had SHUTDOWN_GRACE_S of time to end (supervise.Grace)."""
     process = start_run(ros_env, tmp_path, "--stall-timeout", "60")
     stderr = ReadLines(process.stderr)
-    wait_for_line(process.stdout, "trial    2/")
+    wait_for_line(process.stdout, "trial    2/", errors=process.stderr)
     os.kill(child(process, "clnn_ros.nodes.reward"), signal.SIGTERM)
     process.wait(timeout=120)
     text = stderr.text()
@@ -110,7 +110,7 @@ def test_a_paused_process_is_waited_for(ros_env, tmp_path, node):
          "--max-steps", str(max_steps), "--out", str(tmp_path)],
         env={**ros_env, "CLNN_TEST_RUN": str(tmp_path)}, stdout=subprocess.PIPE,
         stderr=subprocess.PIPE, text=True, start_new_session=True)
-    wait_for_line(process.stdout, "trial    2/")
+    wait_for_line(process.stdout, "trial    2/", errors=process.stderr)
     pid = child(process, f"clnn_ros.nodes.{node}")
     os.kill(pid, signal.SIGSTOP)
     time.sleep(3.0)
@@ -186,7 +186,7 @@ def test_killing_run_all_ends_its_children(ros_env, tmp_path):
         [sys.executable, "-m", "clnn_ros.run_all", "--seed", "1", "--trials", "400", "--out",
          str(tmp_path / "killed")], env=marker, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
         text=True)
-    wait_for_line(process.stdout, "trial    2/")
+    wait_for_line(process.stdout, "trial    2/", errors=process.stderr)
     assert len(processes_with(str(tmp_path))) == 7  # run_all, 5 nodes and the recorder
     process.kill()
     _, stderr = process.communicate(timeout=120)
@@ -207,7 +207,7 @@ def test_killing_run_all_ends_its_children(ros_env, tmp_path):
 def test_a_second_graph_on_the_same_domain_and_namespace_is_refused(ros_env, tmp_path):
     first = start_run(ros_env, tmp_path / "first")
     try:
-        wait_for_line(first.stdout, "trial    2/")
+        wait_for_line(first.stdout, "trial    2/", errors=first.stderr)
         second = subprocess.run(
             [sys.executable, "-m", "clnn_ros.run_all", "--out", str(tmp_path / "second")],
             env={**ros_env, "CLNN_TEST_RUN": str(tmp_path / "second")}, capture_output=True,

@@ -95,7 +95,7 @@ def test_ctrl_c_stops_everything(ros_env, tmp_path, in_private_shm):
          "--trials", "400", "--out", str(tmp_path)],
         env=marker, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         start_new_session=True)
-    wait_for_line(process.stdout, "trial    2/")
+    wait_for_line(process.stdout, "trial    2/", errors=process.stderr)
     os.killpg(process.pid, signal.SIGINT)  # what a terminal does on Ctrl-C
     stdout, stderr = process.communicate(timeout=HANG_S)
     assert process.returncode == 130, stderr
@@ -106,9 +106,10 @@ def test_ctrl_c_stops_everything(ros_env, tmp_path, in_private_shm):
     assert not processes_with(marker["CLNN_TEST_RUN"])
 
 
-def wait_for_line(stream, text: str, timeout: float = 180.0) -> str:
+def wait_for_line(stream, text: str, timeout: float = 180.0, errors=None) -> str:
     """The first line with `text`; the timeout bounds a hang, it times nothing. Without one,
-    the stream's last lines read say what came instead."""
+    the stream's last lines read say what came instead, and `errors` (the process's standard
+    error, a pipe) what it said once the stream ended: why a run ended before the line."""
     found, seen = [], []
 
     def read():
@@ -121,7 +122,13 @@ def wait_for_line(stream, text: str, timeout: float = 180.0) -> str:
     reader.start()
     reader.join(timeout)
     ended = "the stream ended" if not reader.is_alive() else f"none within {timeout} s"
-    assert found, f"no line with {text!r}: {ended}; its last lines:\n{''.join(seen[-20:])}"
+    said = []
+    if not found and errors is not None and not reader.is_alive():
+        rest = threading.Thread(target=lambda: said.append(errors.read()), daemon=True)
+        rest.start()
+        rest.join(30)
+    assert found, (f"no line with {text!r}: {ended}; its last lines:\n{''.join(seen[-20:])}"
+                   + (f"\nits standard error:\n{said[0][-3000:]}" if said else ""))
     return found[0]
 
 

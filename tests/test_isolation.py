@@ -226,8 +226,8 @@ def test_ctrl_c_across_the_link_removes_everything(base_env, tmp_path):
             env=marker, stdout=subprocess.PIPE, stderr=stderr_log, text=True,
             start_new_session=True)
     try:
-        wait_for_line(process.stdout, "environment: ip netns exec")  # the two-host run (first)
-        wait_for_line(process.stdout, "trial    2/")  # its episode is under way
+        wait_for_line(process.stdout, "environment: ip netns exec", errors=process.stderr)  # the two-host run (first)
+        wait_for_line(process.stdout, "trial    2/", errors=process.stderr)  # its episode is under way
     finally:
         os.killpg(process.pid, signal.SIGINT)  # what a terminal does on Ctrl-C
         process.communicate(timeout=HANG_S)

@@ -312,7 +312,7 @@ def test_echo_topics_then_ctrl_c_leaves_a_complete_bag(ros_env, tmp_path):
     """Against a live graph: clnn_ros.topics and clnn_ros.echo (YAML, --field, --raster, Ctrl-C,
     an unknown topic); then Ctrl-C to the whole run leaves a finished bag."""
     process = start_run(ros_env, tmp_path)
-    wait_for_line(process.stdout, "trial    3/")
+    wait_for_line(process.stdout, "trial    3/", errors=process.stderr)
     # The model's topics, and ROS's own: the plumbing is hidden (names with a part "_...").
     graph = {f"{names.absolute(topic)} [{type_name}]" for topic, type_name in names.TOPIC_TYPES.items()
              } | {"/parameter_events [rcl_interfaces/msg/ParameterEvent]",

@@ -144,7 +144,7 @@ def test_two_graphs_in_two_namespaces_on_one_domain(ros_env, tmp_path):
             env={**ros_env, "CLNN_TEST_RUN": str(tmp_path)}, stdout=subprocess.PIPE,
             stderr=subprocess.PIPE, text=True))
     for _, _, process in runs.values():
-        wait_for_line(process.stdout, "trial    2/")
+        wait_for_line(process.stdout, "trial    2/", errors=process.stderr)
     wanted = {"/a/cartpole/state", "/b/cartpole/state", "/a/clock", "/b/rln/action"}
     topics, deadline = set(), time.monotonic() + 90
     while not wanted <= topics and time.monotonic() < deadline:

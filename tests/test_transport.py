@@ -64,7 +64,7 @@ def test_every_process_of_a_run_talks_udp_on_loopback_alone(ros_env, tmp_path, d
          str(tmp_path), *(["--composed"] if composed else [])], env=env,
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
-        wait_for_line(process.stdout, "trial    2/")
+        wait_for_line(process.stdout, "trial    2/", errors=process.stderr)
         sockets = {pid: udp_sockets(pid) for pid in processes_with(str(tmp_path))}
         mapped = {pid: fast_dds_mappings(pid) for pid in sockets}
     finally:

@@ -94,7 +94,7 @@ def test_a_minute_long_pause_of_any_process_is_no_death(tmp_path, tmp_path_facto
         runs[node] = start(env, tmp_path / node, "--stall-timeout", str(2 * PAUSE_S))
     try:
         for node, process in runs.items():  # each paused as soon as it is under way
-            wait_for_line(process.stdout, "trial    2/")
+            wait_for_line(process.stdout, "trial    2/", errors=process.stderr)
             pid = child(process, f"clnn_ros.nodes.{node}")
             os.kill(pid, signal.SIGSTOP)
             paused[node] = (pid, time.monotonic())
@@ -125,7 +125,7 @@ def test_the_bag_holds_what_trials_csv_holds_or_says_what_it_lacks(short_lease, 
     meanwhile never reaches it. The run completes; the bag holds every tick of trials.csv, or
     the last line names exactly the ticks it lacks (as the bag's own record shows them)."""
     process = start(short_lease, tmp_path, "--stall-timeout", "60")
-    wait_for_line(process.stdout, "trial    2/")
+    wait_for_line(process.stdout, "trial    2/", errors=process.stderr)
     process_pause(child(process, "clnn_ros.nodes.recorder"), 3 * LEASE_S)
     stdout, stderr = process.communicate(timeout=HANG_S)
     assert process.returncode == 0, stderr[-3000:]
@@ -165,27 +165,43 @@ with ros_session(sys.argv) as signals:
 @pytest.mark.parametrize("allowed", [False, True], ids=["refused", "allowed"])
 def test_a_foreign_publisher_is_named_and_the_run_never_reported_completed(
         ros_env, tmp_path, allowed):
-    # The forger stays for the whole run, and the run is long (about 11,000 ticks): the trial
-    # manager learns a new participant's node name only after discovery, which takes seconds
-    # on a loaded machine (a 4 s forger beside a 12-trial run went unseen once).
-    trials = 40
-    process = start(ros_env, tmp_path, "--stall-timeout", "30",
-                    *(["--allow-foreign-publishers"] if allowed else []), trials=trials)
-    wait_for_line(process.stdout, "trial    2/")
+    # The graph is held (its environment paused) until the trial manager has named the forger:
+    # a new participant's node name arrives only after discovery, which on a loaded machine can
+    # take longer than a short run lasts (a forger started beside a free-running 40-trial run
+    # went unseen in a fresh-clone suite run: the run had completed before).
+    errors = tmp_path / "run_all.stderr"
+    with open(errors, "w") as stderr_file:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "clnn_ros.run_all", "--seed", str(SEED), "--trials",
+             str(TRIALS), "--max-steps", str(MAX_STEPS), "--out", str(tmp_path),
+             "--stall-timeout", str(HANG_S), *(["--allow-foreign-publishers"] if allowed else [])],
+            env={**ros_env, "CLNN_TEST_RUN": str(tmp_path)}, stdout=subprocess.PIPE,
+            stderr=stderr_file, text=True, start_new_session=True)
+    wait_for_line(process.stdout, "trial    2/", errors=process.stderr)
+    environment = child(process, "clnn_ros.nodes.environment")
+    os.kill(environment, signal.SIGSTOP)
     forger = subprocess.Popen([sys.executable, "-c", FORGER, str(HANG_S)], env=ros_env,
                               stderr=subprocess.PIPE, text=True)
+    named = "a foreign publisher on rln/spikes: node 'forger' in namespace /"
     try:
-        stdout, stderr = process.communicate(timeout=HANG_S)
+        with open(errors) as stream:  # a bound on a hang: the run is held until then
+            deadline = time.monotonic() + HANG_S
+            while named not in stream.read() and time.monotonic() < deadline:
+                time.sleep(0.1)
+        os.kill(environment, signal.SIGCONT)
+        stdout, _ = process.communicate(timeout=HANG_S)
     finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(environment, signal.SIGCONT)
         forger.send_signal(signal.SIGINT)
         forger.communicate(timeout=60)
+    stderr = errors.read_text()
     assert process.returncode == 1, stderr[-3000:]
-    named = "a foreign publisher on rln/spikes: node 'forger' in namespace /"
     assert problem_lines(stderr)[-1].startswith(f"run_all: error: {'tainted: ' if allowed else ''}"
                                                 f"{named}"), stderr[-3000:]
     assert "completed" not in stdout
     if allowed:  # it went on to the end: every trial
-        assert len(steps_of(tmp_path)) == trials
+        assert len(steps_of(tmp_path)) == TRIALS
     analysis = subprocess.run([sys.executable, "-m", "clnn_ros.analyze", str(tmp_path / "bag"),
                                "--out", str(tmp_path / "analysis")], env=ros_env,
                               capture_output=True, text=True, timeout=300)
@@ -202,7 +218,7 @@ def test_a_second_node_of_a_graph_name_mid_run_is_named(ros_env, tmp_path):
         env={**ros_env, "CLNN_TEST_RUN": str(tmp_path)}, stdout=subprocess.PIPE,
         stderr=subprocess.PIPE, text=True, start_new_session=True)
     # Once the graph runs, an intruder is named, not taken for a graph to abandon.
-    wait_for_line(process.stdout, "trial    1/")
+    wait_for_line(process.stdout, "trial    1/", errors=process.stderr)
     intruder = subprocess.Popen([sys.executable, "-m", "clnn_ros.nodes.agent", "--ros-args",
                                  "-p", f"seed:={SEED}"], env=ros_env, stderr=subprocess.DEVNULL)
     try:
@@ -253,7 +269,7 @@ def test_of_two_graphs_the_later_gives_way_however_late_they_meet(ros_env, tmp_p
     process = start(ros_env, tmp_path, trials=400)
     claimers = []
     try:
-        wait_for_line(process.stdout, "trial    2/")
+        wait_for_line(process.stdout, "trial    2/", errors=process.stderr)
         claimers.append(claimer(ros_env, graph_claim(time.time_ns(), "later")))
         line = wait_for_line(process.stderr, "a second graph started", timeout=HANG_S)
         assert re.search(r"\[trial_manager\]: a second graph started in namespace / at tick "
@@ -280,7 +296,7 @@ def test_of_two_graphs_the_later_gives_way_however_late_they_meet(ros_env, tmp_p
 def test_sighup_stops_a_run_with_its_summary(ros_env, tmp_path):
     """A closed terminal (SIGHUP) ends a run as Ctrl-C does: results kept, a summary, 129."""
     process = start(ros_env, tmp_path)
-    wait_for_line(process.stdout, "trial    2/")
+    wait_for_line(process.stdout, "trial    2/", errors=process.stderr)
     process.send_signal(signal.SIGHUP)
     stdout, stderr = process.communicate(timeout=HANG_S)
     assert process.returncode == 128 + signal.SIGHUP, stderr[-3000:]
