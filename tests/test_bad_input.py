@@ -141,6 +141,15 @@ NODE_CASES = [  # (node, its arguments after --ros-args, what the one error line
     ("environment", ["-p", "simulator:=mujoco", "-p", "tau:=0.01"], "tau must be MuJoCo's 0.02 s"),
     ("environment", ["-p", "simulator:=bullet"],
      "simulator must be one of cartpole, gymnasium, mujoco, got 'bullet'"),
+    # a value the node leaves to others is checked as run_all checks it (issue 37)
+    ("environment", ["-p", "trials:=0"], "trials must be a positive integer below 2**31, got 0"),
+    ("environment", ["-p", "trials:=99999999999999999999"],
+     "trials must be a positive integer below 2**31, got 99999999999999999999"),
+    ("encoder", ["-p", "seed:=-1"], "seed must be an integer from 0 to 2**32-1, got -1"),
+    # a renamed node: the graph finds its nodes by name (issue 37: a KeyError before)
+    ("agent", ["-r", "__node:=brain"], "the agent node was renamed 'brain': the graph finds"),
+    ("encoder", ["-r", "__node:=enc2"], "the encoder node was renamed 'enc2'"),
+    ("trial_manager", ["-r", "__node:=tm"], "the trial_manager node was renamed 'tm'"),
     # a params file outside the ROS arguments (here after their end, --): rclpy ignores it
     ("agent", ["--", "--params-file", "nan.yaml"], "unexpected arguments ['--params-file'"),
 ]

@@ -228,6 +228,12 @@ def node_parameters(run: dict, node: str, own: dict | None = None) -> tuple[Para
     known = {*Params().to_dict(), *RUN_SETTINGS, *own}
     if unknown := sorted(set(run) - known):
         raise ParamError(f"unknown parameter {unknown[0]!r}; known: {', '.join(sorted(known))}")
+    # Every value given is checked as run_all checks it, those the node leaves to others too:
+    # a node started by hand with -p trials:=0 says so rather than run.
+    params_from_strings({name: value for name, value in run.items()
+                         if name not in RUN_SETTINGS and name not in own})
+    for name in set(run) & set(RUN_SETTINGS):
+        convert_setting(name, run[name])
     used = NODE_PARAMETERS[node]
     settings = {name: convert_setting(name, run.get(name, RUN_SETTINGS[name]))
                 for name in used if name in RUN_SETTINGS}

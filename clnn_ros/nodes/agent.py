@@ -35,7 +35,7 @@ from .glue import (LOCKSTEP_QOS, Readiness, checked, declare_run_parameters,
 class AgentNode(Node):
     def __init__(self, run: dict, **node_options):
         super().__init__("agent", **node_options)
-        self.params, self.settings = declare_run_parameters(self, run)
+        self.params, self.settings = declare_run_parameters(self, "agent", run)
         use_sim_time(self, "agent")
         # the seed's weights, or those of init_weights (a checkpoint: its whole state)
         start = episode_start(self.settings["init_weights"], self.settings["seed"], self.params,

@@ -23,7 +23,7 @@ from .glue import (LABELS_QOS, LOCKSTEP_QOS, Readiness, checked, declare_run_par
 class EncoderNode(Node):
     def __init__(self, run: dict, **node_options):
         super().__init__("encoder", **node_options)
-        self.params, settings = declare_run_parameters(self, run)
+        self.params, settings = declare_run_parameters(self, "encoder", run)
         use_sim_time(self, "encoder")
         self.encoder = Encoder.from_params(self.params)
         self.finished, self.failure = Future(), None

@@ -58,7 +58,7 @@ def simulator(name: str, params: Params):
 class EnvironmentNode(Node):
     def __init__(self, run: dict, **node_options):
         super().__init__("environment", **node_options)
-        self.params, settings = declare_run_parameters(self, run)
+        self.params, settings = declare_run_parameters(self, "environment", run)
         self.tau_ns = tick_nanoseconds(self.params.tau)
         self.cartpole, pole_half_length_m, track_limit_m = simulator(settings["simulator"],
                                                                      self.params)

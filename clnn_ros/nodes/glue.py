@@ -45,13 +45,21 @@ def steady_clock() -> Clock:
     return Clock(clock_type=ClockType.STEADY_TIME)
 
 
-def declare_run_parameters(node: Node, run: dict, own: dict | None = None) -> tuple[Params, dict]:
-    """The node's part of the run's values (graph.run.node_parameters: validated, a ParamError
-    line otherwise), each declared read-only with its description and range; `own`: {name:
-    (default, description)} of a node outside the model (the recorder's)."""
+def declare_run_parameters(node: Node, role: str, run: dict,
+                           own: dict | None = None) -> tuple[Params, dict]:
+    """The part of the run's values of the node of this `role` (graph.run.node_parameters:
+    validated, a ParamError line otherwise), each declared read-only with its description and
+    range; `own`: {name: (default, description)} of a node outside the model (the recorder's).
+    A node renamed (-r __node:=NAME, a launch file's name=) is refused with a ParamError line:
+    the graph finds its nodes by their names (readiness, the watch of publishers, the stall
+    lines), so a renamed one would be waited for and its messages taken for a stranger's."""
+    if node.get_name() != role:
+        raise ParamError(f"the {role} node was renamed '{node.get_name()}': the graph finds its "
+                         f"nodes by name; a second graph runs in a namespace of its own "
+                         f"(-r __ns:=/NAME), its nodes keep their names")
     defaults = {name: default for name, (default, _) in (own or {}).items()}
-    params, settings = node_parameters(run, node.get_name(), defaults)
-    for name, value in declared_values(params, settings, node.get_name()).items():
+    params, settings = node_parameters(run, role, defaults)
+    for name, value in declared_values(params, settings, role).items():
         text = own[name][1] if name in (own or {}) else None
         node.declare_parameter(name, list(value) if isinstance(value, tuple) else value,
                                descriptor(name, text), ignore_override=True)

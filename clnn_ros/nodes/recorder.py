@@ -58,7 +58,7 @@ class RecorderNode(Node):
     def __init__(self, run: dict, **node_options):
         super().__init__(RECORDER, **node_options)
         params, settings = declare_run_parameters(
-            self, run, own={"bag_path": ("", "the bag directory the recorder writes"),
+            self, RECORDER, run, own={"bag_path": ("", "the bag directory the recorder writes"),
                        "environment": ("", "what ran as the environment node, kept in the bag "
                                        "(run_all sets it): cartpole, gymnasium, mujoco, external "
                                        "or the --env-node command")})

@@ -25,7 +25,7 @@ from .glue import (LOCKSTEP_QOS, Readiness, checked, declare_run_parameters,
 class RewardNode(Node):
     def __init__(self, run: dict, **node_options):
         super().__init__("reward", **node_options)
-        self.params, settings = declare_run_parameters(self, run)
+        self.params, settings = declare_run_parameters(self, "reward", run)
         use_sim_time(self, "reward")
         # a resumed episode (init_weights: a checkpoint) continues a carried success count
         self.counter = episode_start(settings["init_weights"], settings["seed"], self.params,

@@ -65,7 +65,7 @@ CHAIN = (STATE, SPIKES, REWARD, ACTION)
 class TrialManagerNode(Node):
     def __init__(self, run: dict, **node_options):
         super().__init__(TRIAL_MANAGER, **node_options)  # its time is its own: it has the clock
-        self.params, self.settings = declare_run_parameters(self, run)
+        self.params, self.settings = declare_run_parameters(self, TRIAL_MANAGER, run)
         use_sim_time(self, TRIAL_MANAGER)
         self.tau_ns = tick_nanoseconds(self.params.tau)
         self.extra_nodes = names_list(self.settings["extra_nodes"])
