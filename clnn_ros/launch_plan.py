@@ -21,7 +21,8 @@ from pathlib import Path
 
 from .core.params import ParamError
 from .files import cannot_create
-from .graph.names import GRAPH_NODES, RECORDER, TRIAL_MANAGER, clock_remappings, namespace_problem
+from .graph.names import (GRAPH_NODES, NOT_STARTED, RECORDER, TRIAL_MANAGER, clock_remappings,
+                          namespace_problem)
 from .graph.run import DEMO, ENVIRONMENTS, RUN_SETTINGS, default_bag_path, run_values, write_params
 from .supervise import RECORDER_GRACE_S, SHUTDOWN_GRACE_S, exit_description
 
@@ -132,8 +133,8 @@ class Supervision:
         if returncode != 0:
             self.failure = self.failure or self.quit_early() or \
                 exit_description(name, returncode)
-            if name == TRIAL_MANAGER and returncode > 0 and self.running:
-                return Step(timer=self.end_grace_s())  # it sent EPISODE_END
+            if name == TRIAL_MANAGER and 0 < returncode != NOT_STARTED and self.running:
+                return Step(timer=self.end_grace_s())  # it sent EPISODE_END (giving way: not)
             return Step(fail=self.failure)
         if name == TRIAL_MANAGER:
             self.episode_over = True

@@ -281,13 +281,15 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
                 report_failure(recorder, bag_path)
                 failed = True
         summary = fresh_summary(out, began)
-    if summary and not failed:
+    if summary and not failed and status != NOT_STARTED:  # the error line says why not
         mean = summary["mean_steps"]
         print(f"run_all: {summary['exit_reason']}: {summary['trials']} trials, mean steps "
               f"{mean if mean is None else round(mean, 1)}, {summary['ticks']} ticks, "
               f"{summary['ticks_per_s'] or 0.0:.0f} ticks/s"
               + (f"; results in {args.out}" if args.out else ""))
-    if bag_path is not None:
+    if bag_path is not None and status == NOT_STARTED:
+        bag.remove_bag(bag_path)  # what it holds is another graph's
+    elif bag_path is not None:
         with contextlib.suppress(OSError):
             bag_path.rmdir()  # empty: created here to check it could be; nothing was recorded
         finished = (bag_path / bag.METADATA_FILE).is_file()
@@ -306,8 +308,6 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
     if status in (128 + signum for signum in STOP_SIGNALS):
         say("run_all: interrupted")
         return status
-    if status == NOT_STARTED and bag_path is not None:
-        bag.remove_bag(bag_path)  # what it holds is another graph's
     if status == 0 and summary.get("exit_reason") == "interrupted":
         status, reason = 1, "the trial manager was stopped by a signal from outside run_all"
     elif status != 0:

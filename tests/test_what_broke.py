@@ -4,7 +4,8 @@ and the run equals the core; a recorder paused past its lease (shortened here to
 meanwhile, and the last line says which ticks the bag lacks; a foreign publisher on a graph
 topic is named and ends the run, or with --allow-foreign-publishers the run goes on and ends
 "tainted", never "completed", and analyze reads its bag; a second node of a graph name mid-run
-is named; SIGHUP stops a run as Ctrl-C does."""
+is named; of two graphs started at once one gives way and the other is never wrong; SIGHUP stops
+a run as Ctrl-C does."""
 
 from __future__ import annotations
 
@@ -290,6 +291,43 @@ def test_of_two_graphs_the_later_gives_way_however_late_they_meet(ros_env, tmp_p
         f"run_all: error: another graph runs in namespace / on ROS domain {domain}: its trial "
         f"manager started first (give each graph its own --namespace or ROS_DOMAIN_ID)"], stderr
     assert not (tmp_path / "bag").exists()
+    assert not processes_with(str(tmp_path))
+
+
+def test_of_two_graphs_started_at_once_one_gives_way_and_the_other_is_never_wrong(ros_env,
+                                                                                   tmp_path):
+    """Two graphs of the same names, in one namespace and domain, started together with
+    different seeds (issue 37: neither finished, 2 of 2 tries; the graph that went on obeyed the
+    other's end). The claims decide: exactly one gives way with one line and leaves no bag; the
+    other runs every trial and either completes equal to its own seed's core episode or, if the
+    other's nodes ran beside it, ends "tainted", never "completed" with mixed results."""
+    seeds = {"first": 1, "second": 2}
+    runs = {name: subprocess.Popen(
+        [sys.executable, "-m", "clnn_ros.run_all", "--seed", str(seed), "--trials", str(TRIALS),
+         "--max-steps", str(MAX_STEPS), "--out", str(tmp_path / name)],
+        env={**ros_env, "CLNN_TEST_RUN": str(tmp_path / name)}, stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE, text=True, start_new_session=True)
+        for name, seed in seeds.items()}
+    ended = {name: process.communicate(timeout=HANG_S) for name, process in runs.items()}
+    domain = ros_env["ROS_DOMAIN_ID"]
+    gave_way = [name for name, (_, stderr) in ended.items() if problem_lines(stderr)[-1:] and
+                problem_lines(stderr)[-1].startswith(
+                    f"run_all: error: another graph runs in namespace / on ROS domain {domain}")]
+    assert len(gave_way) == 1, {name: stderr[-2000:] for name, (_, stderr) in ended.items()}
+    (other,) = set(seeds) - set(gave_way)
+    stdout, stderr = ended[other]
+    assert runs[gave_way[0]].returncode == 1
+    assert len(problem_lines(ended[gave_way[0]][1])) == 1, ended[gave_way[0]][1][-2000:]
+    assert not (tmp_path / gave_way[0] / "bag").exists()
+    assert "run_all: bag" not in ended[gave_way[0]][0]
+    core = run_episode(seeds[other], Params(trials=TRIALS, max_steps=MAX_STEPS)).steps.tolist()
+    if runs[other].returncode == 0:
+        assert "completed" in stdout and steps_of(tmp_path / other) == core
+    else:
+        assert problem_lines(stderr)[-1].startswith(
+            "run_all: error: tainted: a second node named "), stderr[-3000:]
+        assert "completed" not in stdout and len(steps_of(tmp_path / other)) == TRIALS
+    assert "the episode ended (another graph" not in stderr  # no node obeyed the other's end
     assert not processes_with(str(tmp_path))
 
 

@@ -4,6 +4,9 @@ values, and tests/test_msgs.py checks that they agree."""
 
 import csv
 import io
+import json
+
+import numpy as np
 
 # TrialEvent.event
 START, END, EPISODE_END = 0, 1, 2
@@ -45,3 +48,12 @@ def trials_csv(rows) -> str:
     writer.writerow(TRIALS_CSV_HEADER)
     writer.writerows(rows)
     return text.getvalue()
+
+
+def summary_json(seed: int, steps: list[int], ticks: int, wall_s: float, exit_reason: str) -> str:
+    """summary.json's text, as the trial manager writes it and run_all reads it."""
+    return json.dumps({"seed": seed, "trials": len(steps),
+                       "mean_steps": float(np.mean(steps)) if steps else None,
+                       "ticks": ticks, "wall_s": wall_s,
+                       "ticks_per_s": ticks / wall_s if wall_s else None,
+                       "exit_reason": exit_reason}, indent=2)

@@ -45,3 +45,6 @@ RECORDER_WINDOW = 500
 # Seen once in a suite beside CPU hogs: the trial manager never took the recorder's one
 # announcement (TRANSIENT_LOCAL, reliable; a reader that joined later got it) and waited for it.
 READY_REPEAT_S = 1.0
+# Likewise a trial manager's claim, for as long as it runs: of two graphs started together, one
+# matched the other's claim publisher and got no claim in 5 s (1 of 6 tries, 2 cores loaded).
+CLAIM_REPEAT_S = 1.0

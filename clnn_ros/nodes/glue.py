@@ -174,7 +174,8 @@ class Readiness:
 class GraphClaim:
     """Which of two graphs of the same names in one namespace and domain started first. Each
     trial manager publishes its claim (graph.watch.graph_claim) on CLAIM, kept for one that starts
-    later, and reads the others': `on_other(started_first)` once per other graph. Both order two
+    later and sent again every CLAIM_REPEAT_S (a kept one did not always reach a newcomer), and
+    reads the others': `on_other(started_first)` once per other graph. Both order two
     claims alike, so exactly one of the two gives way however late discovery lets them meet (in
     CI a second graph saw the first one's node names only seconds after its own first tick)."""
 
@@ -182,8 +183,12 @@ class GraphClaim:
         self.claim = graph_claim(time.time_ns(), secrets.token_hex(8))
         self.on_other, self._others, self._log = on_other, set(), node.get_logger()
         self._publisher = node.create_publisher(String, CLAIM, CLAIM_QOS)
-        self._publisher.publish(String(data=self.claim))
+        self._publish()
         self._subscription = node.create_subscription(String, CLAIM, self._receive, CLAIM_QOS)
+        self._timer = node.create_timer(qos.CLAIM_REPEAT_S, self._publish, clock=steady_clock())
+
+    def _publish(self) -> None:
+        self._publisher.publish(String(data=self.claim))
 
     def awaited(self) -> bool:
         """Whether another graph's claim is on its way: its publisher matched (its own one

@@ -14,8 +14,9 @@ What ends an episode early, with exit status 1 and the node to blame:
   message for the tick is missing;
 * a node of `external_nodes` that leaves the ROS graph (the nodes run_all or launch started
   are theirs to watch: they see the process exit; a paused one that drops out is alive);
-* another graph of the same names in the namespace and domain that started first (GraphClaim;
-  or its nodes, seen before the first tick): exit status NOT_STARTED, the run is abandoned; a
+* another graph of the same names in the namespace and domain that started first (GraphClaim),
+  or names two nodes carry for `stall_timeout_s` before the first tick: exit status
+  NOT_STARTED, the run is abandoned, with no EPISODE_END (the other's nodes would obey it); a
   node of `external_nodes` that does not appear within `stall_timeout_s` once the rest is up
   (the others are waited for as long as they take);
 * a foreign publisher on a graph topic (graph.watch), unless allow_foreign_publishers: then
@@ -28,7 +29,6 @@ file) and at the end (final_weights.npy, summary.json).
 
 from __future__ import annotations
 
-import json
 import time
 from collections import Counter
 from pathlib import Path
@@ -42,7 +42,8 @@ from std_msgs.msg import String, UInt64
 
 from ..core.episode import seed_setup
 from ..files import describe_write_error, write_atomically, write_text_atomically
-from ..graph.fields import COMPLETED, END_REASONS, tick_nanoseconds, tick_stamp, trials_csv
+from ..graph.fields import (COMPLETED, END_REASONS, summary_json, tick_nanoseconds, tick_stamp,
+                            trials_csv)
 from ..graph.lockstep import Refusals, RunningTime, TickJoin
 from ..graph.names import (ACTION, CLOCK, GRAPH_NODES, NOT_STARTED, PUBLISHED_BY, READY,
                            RECORDED, RECORDER, REWARD, SPIKES, STATE, TRIAL_EVENT, TRIAL_MANAGER,
@@ -90,7 +91,7 @@ class TrialManagerNode(Node):
         self.last_note = self.last_graph_check = time.monotonic()
         self.running = RunningTime(cap=2 * WATCHDOG_S)
         self.stalled_s = 0.0  # running time of this node without progress
-        self.not_started = False  # another graph of the same names runs
+        self.shared_names, self.shared_since = [], 0.0  # before the start: names two nodes carry
         self.tainted = None  # a foreign publisher seen on a graph topic
         self.named_twice = set()  # graph names two nodes carried once the graph ran
         self.exit_reason = ""
@@ -123,17 +124,15 @@ class TrialManagerNode(Node):
 
     def seen(self, topic: str):
         """State and action make the tick (TickJoin); spikes and reward, watched for the blame,
-        must come in order, one per tick (each may arrive after the tick's action)."""
+        come in order, one per tick (each may come after the action); before the start, none."""
         def receive(msg) -> None:
-            if topic in (STATE, ACTION):
-                accepted = self.join.offer(topic, msg)
-            elif msg.tick != self.current[topic] + 1 or msg.tick > self.join.tick:
-                self.refusals.refuse(topic, msg, f"expected tick {self.current[topic] + 1}")
-                accepted = False
-            else:
-                accepted = True
-            if accepted:
+            if self.started_at is None:
+                self.refusals.refuse(topic, msg, "this graph has not started")
+            elif (self.join.offer(topic, msg) if topic in (STATE, ACTION) else
+                  msg.tick == self.current[topic] + 1 <= self.join.tick):
                 self.current[topic] = msg.tick
+            elif topic not in (STATE, ACTION):  # (TickJoin refuses its own)
+                self.refusals.refuse(topic, msg, f"expected tick {self.current[topic] + 1}")
         return receive
 
     def on_ready(self, msg: String) -> None:
@@ -167,10 +166,8 @@ class TrialManagerNode(Node):
         """The episode is complete once the agent's weights after the last trial are in (they
         travel on their own topic, so they may arrive after the last action)."""
         if self.last_trial_tick is not None and self.weights_tick == self.last_trial_tick:
-            if self.tainted:  # never reported as completed
-                self.stop(1, f"tainted: {self.tainted}", self.last_trial_tick)
-            else:
-                self.stop(0, COMPLETED, self.last_trial_tick)
+            self.stop(*((1, f"tainted: {self.tainted}") if self.tainted else (0, COMPLETED)),
+                      self.last_trial_tick)  # a tainted run is never reported as completed
 
     # --- the watchdog -------------------------------------------------------------------------
 
@@ -181,7 +178,7 @@ class TrialManagerNode(Node):
         if now - self.last_graph_check >= GRAPH_CHECK_S:
             self.last_graph_check = now
             if problem := self.graph_problem():
-                self.stop(NOT_STARTED if self.not_started else 1, problem)
+                self.stop(1, problem)
                 return
         if self.started_at is None:
             self.check_start(now, running)
@@ -191,22 +188,23 @@ class TrialManagerNode(Node):
             self.stop(1, self.stall_reason())
 
     def graph_problem(self) -> str | None:
-        """Another graph of the same names (before the start: the run is abandoned); a second
-        node of the graph's names, a node started by someone else that left, or a foreign
-        publisher on a graph topic (graph.watch)."""
+        """Names two nodes carry (before the start, check_start holds it; after, a warning and a
+        taint), a node started by someone else that left, a foreign publisher (graph.watch)."""
         namespace = self.get_namespace()
         present = Counter(name for name, ns in self.get_node_names_and_namespaces()
                           if ns == namespace)
-        if twice := named_twice(present, self.expected | {TRIAL_MANAGER}):
-            if self.started_at is None:
-                self.not_started = True
-                return another_graph(namespace, f"two nodes named {', '.join(twice)}")
-            # A graph that starts beside this one abandons itself (on_other_graph, in its own
-            # trial manager): this one goes on, and says what it saw.
+        twice = named_twice(present, self.expected | {TRIAL_MANAGER})
+        if self.started_at is None:  # check_start holds the start while names are shared
+            self.shared_names = twice
+        elif twice:
+            # A graph that starts beside this one gives way (on_other_graph, in its own trial
+            # manager): this one goes on, says what it saw, and never reports "completed".
             for name in sorted(set(twice) - self.named_twice):
                 self.get_logger().warning(f"a second node named '{name}' joined namespace "
                                           f"{namespace} at tick {self.join.tick}")
             self.named_twice |= set(twice)
+            self.tainted = self.tainted or f"a second node named '{twice[0]}' ran in namespace " \
+                f"{namespace}: its messages may have been taken for the graph's"
         if self.follows_recorder and RECORDER in self.in_graph:
             self.watch_recorder(bool(present[RECORDER]))
         self.in_graph |= {n for n in self.expected if present[n]}
@@ -249,8 +247,14 @@ class TrialManagerNode(Node):
             self.recorded_tick = max(self.recorded_tick, self.join.tick)  # its progress comes
 
     def check_start(self, now: float, running: float) -> None:
+        # Shared names: another graph's (the claims decide who gives way) or strays' (bounded).
+        self.shared_since = self.shared_since + running if self.shared_names else 0.0
+        if self.shared_since > self.settings["stall_timeout_s"]:
+            self.stop(NOT_STARTED, another_graph(self.get_namespace(), "two nodes named "
+                                                 f"{', '.join(self.shared_names)}"))
+            return
         missing = self.expected - self.ready
-        if not missing and self.matched() and not self.claim.awaited():
+        if not (missing or self.shared_names) and self.matched() and not self.claim.awaited():
             self.started_at = now
             self.advance(0, starts_trial=True)
             return
@@ -273,9 +277,8 @@ class TrialManagerNode(Node):
         if self.held is not None:
             return f"stall: node '{RECORDER}' fell behind at tick {self.recorded_tick} " \
                    f"(no progress for {timeout:g} s)"
-        topic = next((t for t in CHAIN if self.current[t] < tick), None)
-        if topic is None:  # all of the tick is in: only the final weights are missing
-            topic = WEIGHTS
+        # all of the tick in: only the final weights are missing
+        topic = next((t for t in CHAIN if self.current[t] < tick), WEIGHTS)
         refused = f"; last refused {topic}: {self.refusals.last[topic]}" \
             if topic in self.refusals.last else ""
         return f"stall: node '{PUBLISHED_BY[topic]}' went silent at tick {tick} (no " \
@@ -343,14 +346,16 @@ class TrialManagerNode(Node):
         self.save(self.write_results, self.join.tick)
 
     def stop(self, exit_code: int, reason: str, tick: int | None = None) -> None:
-        """End the episode: tell every node, write the results, finish with `exit_code`."""
+        """End the episode: tell the nodes (run_all or launch stops them if it gives way: the
+        other graph's would obey it too), write the results, finish with `exit_code`."""
         if self.finished.done():
             return
         tick = self.join.tick if tick is None else tick
-        self.event_pub.publish(TrialEvent(
-            tick=tick, trial=self.trial, event=TrialEvent.EPISODE_END, end_reason=reason,
-            seed=self.settings["seed"],
-            successful_steps=self.results[-1][2] if self.results else 0))
+        if exit_code != NOT_STARTED:
+            self.event_pub.publish(TrialEvent(
+                tick=tick, trial=self.trial, event=TrialEvent.EPISODE_END, end_reason=reason,
+                seed=self.settings["seed"],
+                successful_steps=self.results[-1][2] if self.results else 0))
         self.exit_reason = reason
         if (problem := self.save(self.write_results, tick)) and not exit_code:
             exit_code, reason = 1, problem
@@ -383,14 +388,9 @@ class TrialManagerNode(Node):
                     np.save(f, self.final_weights)
             write_atomically(out / "final_weights.npy", save_weights)
         wall = time.monotonic() - self.started_at if self.started_at else 0.0
-        steps = [r[2] for r in self.results]
-        write_text_atomically(out / "summary.json", json.dumps({
-            "seed": self.settings["seed"], "trials": len(steps),
-            "mean_steps": float(np.mean(steps)) if steps else None,
-            "ticks": tick + 1 if self.started_at else 0,
-            "wall_s": wall, "ticks_per_s": (tick + 1) / wall if wall else None,
-            "exit_reason": self.exit_reason}, indent=2))
-
+        write_text_atomically(out / "summary.json", summary_json(
+            self.settings["seed"], [r[2] for r in self.results],
+            tick + 1 if self.started_at else 0, wall, self.exit_reason))
 
 def main() -> None:
     raise SystemExit(run_node(TrialManagerNode, on_interrupt=TrialManagerNode.interrupted))
