@@ -174,33 +174,31 @@ class Readiness:
 class GraphClaim:
     """Which of two graphs of the same names in one namespace and domain started first. Each
     trial manager publishes its claim (graph.watch.graph_claim) on CLAIM, kept for one that starts
-    later and sent again every CLAIM_REPEAT_S (a kept one did not always reach a newcomer), and
-    reads the others': `on_other(started_first)` once per other graph. Both order two
-    claims alike, so exactly one of the two gives way however late discovery lets them meet (in
-    CI a second graph saw the first one's node names only seconds after its own first tick)."""
+    later, and reads the others' (all of them: qos.CLAIM): `on_other(started_first)` once per
+    other graph. Both order two claims alike, so exactly one of the two gives way however late
+    discovery lets them meet (in CI a second graph saw the first one's node names only seconds
+    after its own first tick)."""
 
     def __init__(self, node: Node, on_other: Callable[[bool], None]):
         self.claim = graph_claim(time.time_ns(), secrets.token_hex(8))
         self.on_other, self._others, self._log = on_other, set(), node.get_logger()
         self._publisher = node.create_publisher(String, CLAIM, CLAIM_QOS)
-        self._publish()
-        self._subscription = node.create_subscription(String, CLAIM, self._receive, CLAIM_QOS)
-        self._timer = node.create_timer(qos.CLAIM_REPEAT_S, self._publish, clock=steady_clock())
-
-    def _publish(self) -> None:
         self._publisher.publish(String(data=self.claim))
+        self._subscription = node.create_subscription(String, CLAIM, self._receive, CLAIM_QOS)
 
-    def awaited(self) -> bool:
-        """Whether another graph's claim is on its way: its publisher matched (its own one
-        aside), its claim not in yet. A trial manager waits for it before its first tick: on
-        UDP under load the other graph's lockstep messages flowed seconds before its claim (and
-        its node names), and a graph that started meanwhile ran mixed with it."""
-        return self._subscription.get_publisher_count() > 1 + len(self._others)
+    def contested(self) -> bool:
+        """Whether another graph's trial manager is there: its claim publisher matched (its own
+        one aside). A trial manager does not start while one is: on UDP under load the other
+        graph's lockstep messages flowed seconds before its claim (and its node names), and a
+        graph that started meanwhile ran mixed with it; and of two graphs started together, the
+        one that goes on waits until the other has given way (before, it started while the
+        other's nodes were still up, counted their endpoints as its own and stalled at tick 0)."""
+        return self._subscription.get_publisher_count() > 1
 
     def _receive(self, msg: String) -> None:
         if msg.data == self.claim or msg.data in self._others:
             return
-        self._others.add(msg.data)  # heard, whatever it says: awaited() no longer waits for it
+        self._others.add(msg.data)  # heard, whatever it says
         if (other := claim_order(msg.data)) is None:
             self._log.error(f"refused {CLAIM}: {msg.data[:80]!r} is no claim")
             return

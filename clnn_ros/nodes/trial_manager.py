@@ -57,7 +57,7 @@ from .glue import (LOCKSTEP_QOS, PROGRESS_QOS, READY_QOS, GraphClaim, Readiness,
                    steady_clock, use_sim_time)
 
 WATCHDOG_S = 0.1
-GRAPH_CHECK_S = 0.5  # how often the ROS graph is looked at for nodes that left it
+GRAPH_CHECK_S = 0.5  # how often the ROS graph is looked at once running (before: every check)
 WAITING_NOTE_S = 10.0  # while the graph is not ready, a note of what it waits for this often
 # Who publishes what within a tick, in causal order: the first one missing went silent.
 CHAIN = (STATE, SPIKES, REWARD, ACTION)
@@ -110,7 +110,7 @@ class TrialManagerNode(Node):
         # the clock goes to the environment; trial events to the four other nodes
         self.matched = endpoints_matched(self.settings["extra_nodes"],
                                          [(self.clock_pub, 1), (self.event_pub, 4)], inputs)
-        self.create_subscription(String, READY, self.on_ready, READY_QOS)
+        self.create_subscription(String, READY, lambda msg: self.ready.add(msg.data), READY_QOS)
         # announced like every node's (a tool watching the graph start sees who is up)
         self.readiness = Readiness(self, self.matched, is_running=lambda: self.join.tick > 0)
         self.claim = GraphClaim(self, self.on_other_graph)
@@ -135,9 +135,6 @@ class TrialManagerNode(Node):
                 self.refusals.refuse(topic, msg, f"expected tick {self.current[topic] + 1}")
         return receive
 
-    def on_ready(self, msg: String) -> None:
-        self.ready.add(msg.data)
-
     def on_recorded(self, msg: UInt64) -> None:
         if msg.data > self.recorded_tick and self.held is not None:
             self.stalled_s = 0.0  # a slow recorder is not a stalled one
@@ -155,8 +152,7 @@ class TrialManagerNode(Node):
         action) or of the trial's last tick, once."""
         if msg.tick != self.join.tick and (msg.tick != self.trial_end_tick or
                                            self.weights_tick == msg.tick):
-            self.refusals.refuse(WEIGHTS, msg, f"expected the weights after tick "
-                                               f"{self.trial_end_tick}")
+            self.refusals.refuse(WEIGHTS, msg, f"expected weights of tick {self.trial_end_tick}")
             return
         self.final_weights = np.array(msg.weights).reshape(msg.neurons, msg.segments, msg.inputs)
         self.weights_tick = msg.tick
@@ -175,7 +171,7 @@ class TrialManagerNode(Node):
         """Start once the graph is ready; afterwards watch for a stall and for nodes leaving."""
         now = time.monotonic()
         running = self.running.since_last_check()  # a pause of this process is no stall
-        if now - self.last_graph_check >= GRAPH_CHECK_S:
+        if now - self.last_graph_check >= GRAPH_CHECK_S or self.started_at is None:
             self.last_graph_check = now
             if problem := self.graph_problem():
                 self.stop(1, problem)
@@ -253,8 +249,10 @@ class TrialManagerNode(Node):
             self.stop(NOT_STARTED, another_graph(self.get_namespace(), "two nodes named "
                                                  f"{', '.join(self.shared_names)}"))
             return
+        if self.shared_names or self.claim.contested():  # whose announcement? (nodes repeat)
+            self.ready.clear()
         missing = self.expected - self.ready
-        if not (missing or self.shared_names) and self.matched() and not self.claim.awaited():
+        if not (missing or self.shared_names) and self.matched() and not self.claim.contested():
             self.started_at = now
             self.advance(0, starts_trial=True)
             return
