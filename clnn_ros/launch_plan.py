@@ -36,6 +36,8 @@ ARGUMENTS = {
     "stall_timeout": "seconds without a tick before the trial manager ends the run (default "
                      f"{RUN_SETTINGS['stall_timeout_s']:g}; also how long env:=external's node is "
                      "waited for)",
+    "rate": "at most this many ticks per second of wall time (50: real time; default 0: as "
+            "fast as the graph goes)",
     "params_file": "a ROS 2 parameters YAML (/**: ros__parameters: ...)",
     "namespace": "put every node and topic under /NAME/",
     "env": f"environment node: {', '.join(ENVIRONMENTS)} (default cartpole)",
@@ -44,7 +46,7 @@ ARGUMENTS = {
            "bags/run_<UTC time>)",
 }
 RUN_VALUES = {"seed": "seed", "trials": "trials", "nsv": "nsv", "state_vars": "state_vars",
-              "stall_timeout": "stall_timeout_s"}  # launch argument: run value
+              "stall_timeout": "stall_timeout_s", "rate": "rate_hz"}  # launch argument: run value
 RECORD = "record"  # launch argument: true (default) or false, as run_all's --no-record
 
 

@@ -92,6 +92,9 @@ def parse_args(argv):
     parser.add_argument("--stall-timeout", type=float,
                         help="seconds without progress before the graph is declared stalled "
                              f"(default {RUN_SETTINGS['stall_timeout_s']:g})")
+    parser.add_argument("--rate", type=int, metavar="HZ",
+                        help="at most HZ ticks per second of wall time (50: real time, as a "
+                             "robot runs: a live view follows); default: as fast as it goes")
     parser.add_argument("--quiet", action="store_true", help="no per-trial progress lines")
     parser.add_argument("--allow-foreign-publishers", action="store_true",
                         help="a publisher on a graph topic other than the graph's node (forged "
@@ -171,7 +174,7 @@ def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
         ("seed", args.seed), ("trials", args.trials), ("nsv", args.nsv),
         ("state_vars", args.state_vars), ("physics", args.physics),
         ("velocity_edge", args.velocity_edge), ("max_steps", args.max_steps),
-        ("stall_timeout_s", args.stall_timeout)) if value is not None}
+        ("stall_timeout_s", args.stall_timeout), ("rate_hz", args.rate)) if value is not None}
     if args.quiet:
         flags["progress"] = False
     if args.allow_foreign_publishers:

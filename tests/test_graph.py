@@ -5,6 +5,7 @@ test_fuzz.py)."""
 from __future__ import annotations
 
 import csv
+import json
 import os
 import signal
 import subprocess
@@ -60,6 +61,22 @@ def test_graph_equals_core(ros_env, tmp_path, composed, nsv, options):
     assert read_steps(tmp_path) == core.steps.tolist()
     np.testing.assert_array_equal(np.load(tmp_path / "final_weights.npy"), core.final_weights)
     assert "completed: 10 trials" in result.stdout
+
+
+@pytest.mark.parametrize("composed", [False, True], ids=["processes", "composed"])
+def test_a_run_paced_at_50_hz_equals_the_unpaced_one(ros_env, tmp_path, composed):
+    """--rate 50: a tick at most every 20 ms of wall time (a robot's rate; issue 37), the same
+    trials and weights as the core; the pace is a lower bound on the wall time, never a speed."""
+    trials, max_steps, seed, rate = 3, 60, 1, 50
+    result = run_all(ros_env, "--seed", str(seed), "--trials", str(trials), "--max-steps",
+                     str(max_steps), "--rate", str(rate), "--no-record", "--out", str(tmp_path),
+                     *(["--composed"] if composed else []))
+    assert result.returncode == 0, result.stderr
+    core = run_episode(seed, Params(trials=trials, max_steps=max_steps))
+    assert read_steps(tmp_path) == core.steps.tolist()
+    assert np.array_equal(np.load(tmp_path / "final_weights.npy"), core.final_weights)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["wall_s"] >= (summary["ticks"] - 1) / rate
 
 
 @pytest.mark.parametrize("options", [

@@ -86,8 +86,10 @@ def test_a_read_only_parameter_is_refused_with_a_reason(agent_by_hand):
         name="use_sim_time", value=ParameterValue(type=ParameterType.PARAMETER_BOOL,
                                                   bool_value=True))])
     result = call(agent_by_hand, SetParameters, "/agent/set_parameters", sim_time).results[0]
-    assert not result.successful and "use_sim_time is read-only" in result.reason
-    assert result.reason.endswith("runs on its own time")
+    assert not result.successful and "read-only" in result.reason
+    described = call(agent_by_hand, DescribeParameters, "/agent/describe_parameters",
+                     DescribeParameters.Request(names=["use_sim_time"])).descriptors[0]
+    assert described.read_only and described.description.endswith("runs on its own time")
 
 
 def test_parameters_describe_their_meaning_and_constraints(agent_by_hand):

@@ -23,7 +23,7 @@ from .names import RECORDER, TRIAL_MANAGER, clock_remappings
 RUN_SETTINGS = {"seed": 0, "stall_timeout_s": 5.0, "out_dir": "", "progress": True,
                 "extra_nodes": "", "external_nodes": "", "init_weights": "",
                 "marker_period_ticks": 5, "simulator": "cartpole",
-                "allow_foreign_publishers": False}
+                "allow_foreign_publishers": False, "rate_hz": 0}
 # The simulators the project's environment node runs (its setting `simulator`), and external:
 # none is started, one started by someone else is waited for (docs/ENV_CONTRACT.md).
 SIMULATORS = ("cartpole", "gymnasium", "mujoco")
@@ -64,7 +64,7 @@ NODE_PARAMETERS = {
     "agent": (*COMMON, *NETWORK, *LEARNING, "force", *RESUME, "out_dir"),
     TRIAL_MANAGER: (*COMMON, *NETWORK, *STATE_RULE, *RESUME, "force", "w_max", "n_angles",
                     "angle_span_deg", "stall_timeout_s", "out_dir", "progress",
-                    "external_nodes", "allow_foreign_publishers"),
+                    "external_nodes", "allow_foreign_publishers", "rate_hz"),
 }
 # What the run's params file always holds, at its effective value, for an environment node of
 # someone else's: the parameters of docs/ENV_CONTRACT.md's table (tests/test_env_contract.py
@@ -151,6 +151,9 @@ DESCRIPTIONS = {
     "allow_foreign_publishers": ("a publisher on a graph topic that is not the graph's node "
                                  "(forged messages) ends the run (false), or is named and the "
                                  "run goes on, its results reported as tainted (true)", None),
+    "rate_hz": ("ticks per second of wall time at most, e.g. 50 (tau 0.02 s: real time), so "
+                "that ros2 topic echo, rqt or Foxglove follow the run as a robot runs; 0: as "
+                "fast as the graph goes", (0, 2**32 - 1)),
     "simulator": ("what the environment node simulates: cartpole (the core's physics, as the "
                   "model parameters say), gymnasium (CartPole-v1's own constants) or mujoco "
                   "(a MuJoCo plant with gymnasium's constants)", SIMULATORS),

@@ -10,8 +10,7 @@ import sys
 import time
 from typing import Callable
 
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                SetParametersResult)
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.node import Node
@@ -171,6 +170,27 @@ class Readiness:
             self._announced_at = now
 
 
+class Pace:
+    """Ticks at most `rate_hz` a second of wall time (0: as fast as the graph goes): a tick
+    offered between two periods of a steady timer is released at the next one."""
+
+    def __init__(self, node: Node, rate_hz: int, release: Callable[[int, bool], None]):
+        self.release, self.rate_hz, self.due = release, rate_hz, None
+        if rate_hz:
+            node.create_timer(1.0 / rate_hz, self._on_period, clock=steady_clock())
+
+    def offer(self, tick: int, starts_trial: bool) -> None:
+        if self.rate_hz:
+            self.due = (tick, starts_trial)
+        else:
+            self.release(tick, starts_trial)
+
+    def _on_period(self) -> None:
+        if self.due is not None:
+            due, self.due = self.due, None
+            self.release(*due)
+
+
 class GraphClaim:
     """Which of two graphs of the same names in one namespace and domain started first. Each
     trial manager publishes its claim (graph.watch.graph_claim) on CLAIM, kept for one that starts
@@ -271,9 +291,8 @@ def use_sim_time(node: Node, role: str) -> None:
         node.set_parameters([Parameter("use_sim_time", Parameter.Type.BOOL, True)])
     runs_on = ("the graph's sim time" if node.get_parameter("use_sim_time").value
                else "its own time")
-
-    def refuse_use_sim_time(parameters) -> SetParametersResult:
-        changed = any(parameter.name == "use_sim_time" for parameter in parameters)
-        return SetParametersResult(successful=not changed, reason=(
-            f"use_sim_time is read-only: the node runs on {runs_on}") if changed else "")
-    node.add_on_set_parameters_callback(refuse_use_sim_time)
+    # rclpy declares it without a description; ros2 param describe shows this one
+    node.set_descriptor("use_sim_time", ParameterDescriptor(
+        name="use_sim_time", type=ParameterType.PARAMETER_BOOL, read_only=True,
+        description=f"whether the node's ROS time is the sim time of /clock; read once at "
+                    f"start: the node runs on {runs_on}"))

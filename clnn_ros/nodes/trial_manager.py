@@ -52,7 +52,7 @@ from ..graph.qos import RECORDER_WINDOW
 from ..graph.run import NODE_PARAMETERS, names_list
 from ..graph.watch import another_graph, describe_foreign, foreign_publishers, gone, named_twice
 from ..init_weights import episode_start
-from .glue import (LOCKSTEP_QOS, PROGRESS_QOS, READY_QOS, GraphClaim, Readiness, checked,
+from .glue import (LOCKSTEP_QOS, PROGRESS_QOS, READY_QOS, GraphClaim, Pace, Readiness, checked,
                    declare_run_parameters, endpoints_matched, run_node,
                    steady_clock, use_sim_time)
 
@@ -114,6 +114,7 @@ class TrialManagerNode(Node):
         # announced like every node's (a tool watching the graph start sees who is up)
         self.readiness = Readiness(self, self.matched, is_running=lambda: self.join.tick > 0)
         self.claim = GraphClaim(self, self.on_other_graph)
+        self.pace = Pace(self, self.settings["rate_hz"], self.publish_tick)
         self.recorded_tick = -1
         self.held = None  # (tick, starts a trial): the next tick, waiting for the recorder
         self.follows_recorder = RECORDER in self.extra_nodes
@@ -291,13 +292,14 @@ class TrialManagerNode(Node):
                 tick > self.recorded_tick + RECORDER_WINDOW:
             self.held = (tick, starts_trial)
             return
+        self.pace.offer(tick, starts_trial)  # at most rate_hz ticks a second (0: unpaced)
+
+    def publish_tick(self, tick: int, starts_trial: bool) -> None:
+        self.stalled_s = 0.0  # a paced tick's wait is no stall
         if starts_trial:
             self.event_pub.publish(TrialEvent(
                 tick=tick, trial=self.trial, event=TrialEvent.START,
                 initial_angle_deg=float(self.angles[self.trial]), seed=self.settings["seed"]))
-        self.publish_clock(tick)
-
-    def publish_clock(self, tick: int) -> None:
         clock = self.clock_msg  # one message object, refilled each tick
         clock.clock.sec, clock.clock.nanosec = tick_stamp(tick, self.tau_ns)
         self.clock_pub.publish(clock)
