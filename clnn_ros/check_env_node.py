@@ -32,7 +32,7 @@ from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before r
 from .check_env.rules import (CHECKED_RUN, MAX_STEPS, RULES, RUN_PHYSICS, STRICT_PHYSICS,
                               physics_summary)
 from .cli import OneLineArgumentParser
-from .graph.names import namespace_problem
+from .graph.names import ENV_CONTRACT_VERSION, namespace_problem
 from .graph.run import run_values, write_params
 from .process_signals import EXIT_WITH_STDIN
 
@@ -78,9 +78,10 @@ def main(argv: list[str] | None = None) -> int:
                "ROS_AUTOMATIC_DISCOVERY_RANGE": os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE",
                                                                "LOCALHOST")}
         env.setdefault("ROS_LOG_DIR", str(Path(tmp) / "ros_log"))
-        print(f"check_env_node: {' '.join(args.command)} (ROS_DOMAIN_ID {args.domain_id}, "
-              f"namespace {args.namespace}, max_steps {MAX_STEPS}, "
-              f"{physics_summary(CHECKED_RUN)})", flush=True)
+        print(f"check_env_node: {' '.join(args.command)} against environment contract "
+              f"version {ENV_CONTRACT_VERSION} (ROS_DOMAIN_ID {args.domain_id}, namespace "
+              f"{args.namespace}, max_steps {MAX_STEPS}, {physics_summary(CHECKED_RUN)})",
+              flush=True)
         # after the arguments: --help and a usage error need no ROS
         from .check_env.probe import Probe
         from .check_env.scenario import run_checks

@@ -6,7 +6,8 @@ BUG: no_reset (successful_steps not reset at START), wrong_tick (the state of ti
 is published with the tick one too high), no_exit (ignores EPISODE_END), accept_bad_force
 (applies force_direction 5 as +F), silent (never announces readiness), mute (stops publishing
 states at tick 50 but stays alive), crash (raises at start), default_cart_mass (steps the default
-cart_mass, not the run's).
+cart_mass, not the run's), contract_v1 (stamps its first state's header, as a node written
+against version 1 of the contract did).
 """
 
 import sys
@@ -40,6 +41,8 @@ class BrokenEnvironmentNode(EnvironmentNode):
             refuse(topic, msg, reason, kind)
 
         def publish_wrong_tick(msg) -> None:
+            if "contract_v1" in BUGS:
+                msg.header.stamp = self.get_clock().now().to_msg()
             if "wrong_tick" in BUGS and msg.tick >= 2:
                 msg.tick += 1
             publish(msg)

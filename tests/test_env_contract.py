@@ -29,7 +29,7 @@ from clnn_ros.core.episode import run_episode
 from clnn_ros.core.gym_physics import GymCartPole, gym_matched_params
 from clnn_ros.core.params import ParamError, Params, params_from_strings
 from clnn_ros.core.physics import CartPole
-from clnn_ros.graph.names import RECORDER
+from clnn_ros.graph.names import ENV_CONTRACT_VERSION, RECORDER
 from clnn_ros.graph.run import ENVIRONMENT_GIVEN
 
 from conftest import HANG_S, assert_run_equals_episode, free_domain_id
@@ -56,6 +56,9 @@ CHECKS = {
                           ["FAIL  physics: ", "PASS  reset", "PASS  failure"]),
     "no_reset": ([PY, BROKEN, "no_reset"], [],
                  ["FAIL  reset: successful_steps not reset at START (was 60, published 60)"]),
+    # written against version 1 of the contract: the field is named as an older contract's
+    "contract_v1": ([PY, BROKEN, "contract_v1"], [],
+                    ["check_env_node: ", "FAIL  lockstep: publishes no cartpole/state"]),
     "wrong_tick": ([PY, BROKEN, "wrong_tick"], [],
                    ["FAIL  lockstep: state tick 3 after action of tick 1", "PASS  reset"]),
     "several": ([PY, BROKEN, "no_exit,accept_bad_force,silent"], ["--startup-timeout", "3"],
@@ -104,6 +107,11 @@ def test_checker(checks, name):
             len(RULES) + (name == "cartpole"), report
     if name == "default_cart_mass":
         assert "it steps cart_mass 0.711 kg (the default), not the run's 0.9" in report, report
+    if name == "contract_v1":
+        assert lines[0].startswith(f"check_env_node: {PY} {BROKEN} contract_v1 against "
+                                   f"environment contract version {ENV_CONTRACT_VERSION} ("), report
+        assert "AttributeError: 'CartPoleState' object has no attribute 'header' (a field of an " \
+               "older contract: header (version 1); docs/ENV_CONTRACT.md, Versions)" in report
 
 
 def steps_of(cartpole: CartPole, directions) -> list:

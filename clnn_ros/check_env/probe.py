@@ -30,6 +30,9 @@ from ..graph.names import ACTION, CLOCK, READY, STATE, TRIAL_EVENT
 from ..rclpy_session import qos_profile
 from .rules import FORCE_N, NAME, TAU_NS
 
+# The message fields of an older environment contract, and which (docs/ENV_CONTRACT.md)
+OLDER_FIELDS = {"header": "version 1", "failed": "version 1", "failure_reason": "version 1"}
+
 LOCKSTEP_QOS = qos_profile(qos.LOCKSTEP)
 READY_QOS = qos_profile(qos.READY)
 QUIET_S = 0.3  # how long "no state may come" is watched
@@ -146,11 +149,18 @@ class Probe:
             if status is not None else ""
 
     def stderr_tail(self) -> str:
-        """': <the last line the process wrote to stderr>', or ''."""
+        """': <the last line the process wrote to stderr>', or ''; a field the messages of an
+        older version of the contract had is named as such."""
         self.stderr.flush()
         lines = [line for line in Path(self.stderr.name).read_text(errors="replace").splitlines()
                  if line.strip()]
-        return f": {lines[-1].strip()}" if lines else ""
+        if not lines:
+            return ""
+        older = [f"{field} ({version})" for field, version in OLDER_FIELDS.items()
+                 if "AttributeError" in lines[-1] and f"'{field}'" in lines[-1]]
+        return f": {lines[-1].strip()}" + (
+            f" (a field of an older contract: {older[0]}; docs/ENV_CONTRACT.md, Versions)"
+            if older else "")
 
     def environment_present(self) -> bool:
         return (NAME, self.namespace) in self.node.get_node_names_and_namespaces()
