@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from .analysis_data import gaps, input_labels
-from .graph.names import TOPIC_TYPES, absolute
+from .graph.names import PER_TICK, TOPIC_TYPES, absolute
 
 # What each picture shows, for summary.md ({trial}: the chosen trial; trial_N.gif: ANIMATION).
 PICTURES = {
@@ -72,6 +72,18 @@ def environment_lines(data: dict, labels: list[str]) -> list[str]:
             f"* velocity edge: {velocity}"]
 
 
+def bag_short_of_the_run(ticks: dict, end) -> list[str]:
+    """A line when a per-tick topic's last tick in the bag comes before the episode's end (its
+    EPISODE_END's tick: the last trial's last tick, or the tick an early end waited for)."""
+    last = {topic: max(ticks[topic], default=-1) for topic in PER_TICK if topic in ticks}
+    if end is None or not last or min(last.values()) >= end.tick - 1:
+        return []
+    topic = min(last, key=last.get)
+    return [f"* **the bag ends before the run**: `{topic}` up to tick {last[topic]}, the episode "
+            f"to tick {end.tick} (the recorder fell behind or stopped: the bag lacks ticks "
+            f"{last[topic] + 1}-{end.tick})"]
+
+
 def summary_markdown(bag_path: Path, result: dict, salvage: bool) -> str:
     """summary.md's text, from what analyze() found and wrote (`result`)."""
     data, rows, chosen = result["data"], result["rows"], result["chosen"]
@@ -89,7 +101,9 @@ def summary_markdown(bag_path: Path, result: dict, salvage: bool) -> str:
              *environment_lines(data, input_labels(data, inputs)),
              "* how it ended: " + (f"EPISODE_END, `{end.end_reason}` at tick {end.tick}" if end
                                     else "no EPISODE_END in the bag (interrupted, or the "
-                                         "recorder was killed)"),
+                                         "recorder stopped before the run did): how far the "
+                                         "run went is not in the bag; its trials.csv says"),
+             *bag_short_of_the_run(data["ticks"], end),
              f"* trials completed: {len(rows)}" + (
                  f"; mean successful steps {np.mean(steps):.1f}, best {max(steps):,}, last "
                  f"{steps[-1]:,}" if rows else ""),

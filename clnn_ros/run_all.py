@@ -299,10 +299,13 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
         if finished or not bag_path.exists():  # an unfinished one: the error line says so
             print(f"run_all: bag {bag_path}" if finished else
                   "run_all: nothing recorded, no bag", flush=True)
-        if summary.get("exit_reason") == COMPLETED and finished and \
-                (lacking := bag_lacks(bag_path, summary["ticks"])):
-            say(f"run_all: warning: the bag lacks {lacking} (the run's ticks: 0-"
-                f"{summary['ticks'] - 1}, as in trials.csv)")
+        # The ticks the run completed: an episode ended early leaves its last tick unfinished
+        # (a stall's is missing by definition); Ctrl-C's last messages may be in flight.
+        done = summary.get("ticks", 0) - (summary.get("exit_reason") != COMPLETED)
+        if summary.get("exit_reason") not in (None, "interrupted") and finished and done > 0 \
+                and (lacking := bag_lacks(bag_path, done)):
+            say(f"run_all: warning: the bag lacks {lacking} (the run's ticks: 0-{done - 1}, "
+                f"as in trials.csv)")
         if recorder_forced and bag_path.exists() and not finished:  # else its own lines said so
             say(f"run_all: warning: the recorder had to be stopped before it finished the bag: "
                 f"python -m clnn_ros.bag repair {bag_path}")

@@ -58,17 +58,34 @@ def waited_for_cpu_s(pid: int) -> float:
         return 0.0
 
 
+def stopped(pid: int) -> bool:
+    """Whether process `pid` is stopped (SIGSTOP, Ctrl-Z, a debugger: /proc/PID/stat state T or
+    t): alive, and not running until someone continues it."""
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rpartition(")")[2].split()[0] in ("T", "t")
+    except (OSError, IndexError):
+        return False
+
+
 class Grace:
     """The time a child has had since this began: the wall time less what its main thread
-    spent waiting for a CPU. A child starved on a loaded machine is slow, not hung: a
-    suite beside CPU hogs saw a trial manager take over SHUTDOWN_GRACE_S of wall time to exit
-    after its results were written (run fh1), with none of that time its own."""
+    spent waiting for a CPU and the time it was seen stopped (looked at on each elapsed()). A
+    child starved on a loaded machine is slow, not hung: a suite beside CPU hogs saw a trial
+    manager take over SHUTDOWN_GRACE_S of wall time to exit after its results were written
+    (run fh1), with none of that time its own; and a recorder stopped past the grace was
+    terminated once continued instead of finishing its bag (issue 37)."""
 
     def __init__(self, pid: int):
         self.pid, self.began, self.waited = pid, time.monotonic(), waited_for_cpu_s(pid)
+        self.looked_at, self.stopped_s = self.began, 0.0
 
     def elapsed(self) -> float:
-        return time.monotonic() - self.began - (waited_for_cpu_s(self.pid) - self.waited)
+        now = time.monotonic()
+        if stopped(self.pid):
+            self.stopped_s += now - self.looked_at
+        self.looked_at = now
+        return now - self.began - self.stopped_s - (waited_for_cpu_s(self.pid) - self.waited)
 
 
 def exit_description(name: str, returncode: int) -> str:
@@ -187,7 +204,14 @@ class Supervisor:
         graces = [Grace(child.process.pid) for child in chosen]
         forced = []
         for child, grace in zip(chosen, graces):
-            if child.wait_while(lambda: grace.elapsed() < grace_s):
+            told = []
+
+            def allowed() -> bool:
+                if not told and stopped(child.process.pid):
+                    told.append(say(f"run_all: node {child.name} is stopped (SIGSTOP?): waiting "
+                                    f"for it to continue (kill -CONT {child.process.pid})"))
+                return grace.elapsed() < grace_s
+            if child.wait_while(allowed):
                 continue
             if child.shows_stacks:  # where it hangs, in the run's log
                 say(f"run_all: node {child.name} is slow to exit; the stacks of its threads:")
@@ -339,9 +363,11 @@ def start_recorder(supervisor: Supervisor, values: dict, bag_path: Path, workdir
 
 def stop_recorder(supervisor: Supervisor, episode_ended: bool) -> bool:
     """After the nodes: the recorder ends by itself after EPISODE_END; otherwise (Ctrl-C, the
-    trial manager stopped from outside) it is told to finish the bag now. Returns whether it
-    had to be terminated."""
-    forced = supervisor.stop([RECORDER], RECORDER_GRACE_S, interrupt=not episode_ended)
+    trial manager stopped from outside), or when it is stopped (SIGSTOP: the end, sent while it
+    could not take it, is gone with its sender), it is told to finish the bag now, which it does
+    once continued. Returns whether it had to be terminated."""
+    paused = stopped(supervisor.children[RECORDER].process.pid)
+    forced = supervisor.stop([RECORDER], RECORDER_GRACE_S, interrupt=not episode_ended or paused)
     warn_forced(forced)
     return bool(forced)
 

@@ -163,6 +163,38 @@ with ros_session(sys.argv) as signals:
 """
 
 
+def test_a_recorder_stopped_past_the_stall_timeout_finishes_its_bag_and_the_lack_is_said(
+        ros_env, tmp_path):
+    """The recorder stopped (SIGSTOP) until the graph, held RECORDER_WINDOW ticks ahead of it,
+    has stalled and run_all is ending the run (issue 37: it was terminated once continued and
+    nothing said that the bag was shorter than the run): run_all says it waits for the stopped
+    recorder, which finishes its bag once continued; the last lines say what the bag lacks and
+    why the run ended; analyze says the bag stops short of the run."""
+    process = start(ros_env, tmp_path, trials=40)
+    wait_for_line(process.stdout, "trial    2/", errors=process.stderr)
+    recorder = child(process, "clnn_ros.nodes.recorder")
+    os.kill(recorder, signal.SIGSTOP)
+    try:
+        wait_for_line(process.stderr, "run_all: node recorder is stopped", timeout=HANG_S)
+    finally:
+        os.kill(recorder, signal.SIGCONT)
+    _, stderr = process.communicate(timeout=HANG_S)
+    assert process.returncode == 1, stderr[-3000:]
+    lines = problem_lines(stderr)
+    assert lines[-1].startswith("run_all: error: stall: node 'recorder' fell behind at tick "), \
+        stderr[-3000:]
+    assert lines[-2].startswith("run_all: warning: the bag lacks ticks "), stderr[-3000:]
+    assert not any("terminated" in line or "killed" in line for line in lines), stderr[-3000:]
+    assert (tmp_path / "bag" / "metadata.yaml").is_file()  # finished, not repaired
+    analysis = subprocess.run([sys.executable, "-m", "clnn_ros.analyze", str(tmp_path / "bag"),
+                               "--out", str(tmp_path / "analysis")], env=ros_env,
+                              capture_output=True, text=True, timeout=300)
+    assert analysis.returncode == 0, analysis.stderr
+    summary = (tmp_path / "analysis" / "summary.md").read_text()
+    assert "how far the run went is not in the bag" in summary or \
+        "the bag ends before the run" in summary, summary
+
+
 @pytest.mark.parametrize("allowed", [False, True], ids=["refused", "allowed"])
 def test_a_foreign_publisher_is_named_and_the_run_never_reported_completed(
         ros_env, tmp_path, allowed):
