@@ -71,9 +71,13 @@ class Supervisor:
 
 
 def graph_nodes(context):
-    workdir = Path(tempfile.mkdtemp(prefix="clnn_ros_launch_"))
     arguments = {name: LaunchConfiguration(name).perform(context) for name in (*ARGUMENTS, RECORD)}
-    planned = plan(arguments, workdir)
+    workdir = Path(tempfile.mkdtemp(prefix="clnn_ros_launch_"))
+    try:
+        planned = plan(arguments, workdir)
+    except BaseException:  # a refused argument (trials:=-3) leaves no directory behind
+        shutil.rmtree(workdir, ignore_errors=True)
+        raise
     supervisor = Supervisor([node.executable for node in planned])
     actions = [RegisterEventHandler(OnShutdown(
         on_shutdown=lambda _event, _context: shutil.rmtree(workdir, ignore_errors=True)))]
