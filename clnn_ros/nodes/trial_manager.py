@@ -235,8 +235,8 @@ class TrialManagerNode(Node):
         run_all says which)."""
         if not present and not self.recorder_out:
             self.recorder_out = True
-            self.get_logger().warning(f"the recorder dropped out of the ROS graph at tick "
-                                      f"{self.join.tick}: the graph goes on without its record")
+            self.get_logger().warning(f"the recorder left the ROS graph at tick {self.join.tick} "
+                                      f"(paused past its lease, or ended): unrecorded from now")
             if self.held is not None:
                 self.release_held(self.held[0] - RECORDER_WINDOW)
         elif present and self.recorder_out:
