@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import time
 
-from clnn_ros.supervise import Grace, Supervisor
+from clnn_ros.supervise import Grace, Supervisor, stopped
 
 IGNORES_SIGTERM = ("import signal, sys, time; signal.signal(signal.SIGTERM, signal.SIG_IGN); "
                    "print('ready', file=sys.stderr, flush=True); time.sleep(60)")
@@ -97,3 +98,25 @@ def test_a_childs_grace_does_not_count_the_time_it_waited_for_a_cpu():
         for process in processes:
             process.kill()
             process.wait()
+
+
+def test_a_childs_grace_does_not_count_the_time_it_was_stopped():
+    """A stopped child (SIGSTOP, a debugger) is alive, not hung: a recorder stopped past its
+    grace was terminated once continued instead of finishing its bag (issue 37). Its grace
+    counts none of the time it is seen stopped, and again runs once it is continued."""
+    process = subprocess.Popen([sys.executable, "-c", SLEEPS], stderr=subprocess.PIPE)
+    try:
+        assert process.stderr.readline() == b"ready\n"
+        os.kill(process.pid, signal.SIGSTOP)
+        grace = Grace(process.pid)
+        for _ in range(10):
+            time.sleep(0.1)
+            assert grace.elapsed() < 0.05
+        assert stopped(process.pid)
+        os.kill(process.pid, signal.SIGCONT)
+        time.sleep(0.3)
+        assert not stopped(process.pid)
+        assert grace.elapsed() > 0.25
+    finally:
+        process.kill()
+        process.wait()
