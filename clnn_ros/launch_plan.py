@@ -24,7 +24,7 @@ from .files import cannot_create
 from .graph.names import (GRAPH_NODES, NOT_STARTED, RECORDER, TRIAL_MANAGER, clock_remappings,
                           namespace_problem)
 from .graph.run import DEMO, ENVIRONMENTS, RUN_SETTINGS, default_bag_path, run_values, write_params
-from .supervise import RECORDER_GRACE_S, SHUTDOWN_GRACE_S, exit_description
+from .supervise import RECORDER_GRACE_S, SHUTDOWN_GRACE_S, exit_description, unfinished_bag
 
 # launch argument: description; an empty value leaves it out. RUN_VALUES are run values.
 ARGUMENTS = {
@@ -57,6 +57,7 @@ class NodeLaunch:
     params_file: Path
     remappings: tuple[tuple[str, str], ...]
     log_level: str = "warn"
+    bag_path: Path | None = None  # the recorder's
 
 
 def plan(arguments: dict[str, str], workdir: Path) -> list[NodeLaunch]:
@@ -84,7 +85,8 @@ def plan(arguments: dict[str, str], workdir: Path) -> list[NodeLaunch]:
         bag_path = (Path(given["bag"]) if "bag" in given else default_bag_path(out)).resolve()
         nodes.append(NodeLaunch(RECORDER, namespace, write_params(
             workdir / "recorder_params.yaml",
-            {**values, "bag_path": str(bag_path), "environment": env}), remappings))
+            {**values, "bag_path": str(bag_path), "environment": env}), remappings,
+            bag_path=bag_path))
         values["extra_nodes"] = RECORDER
     if env == "external":
         values["external_nodes"] = "environment"
@@ -121,8 +123,8 @@ class Supervision:
       itself ends within SHUTDOWN_GRACE_S; otherwise the node was stopped by someone else (the
       trial manager would wait for it with no end before the first tick, or stall): failed."""
 
-    def __init__(self, names: list[str]):
-        self.running = set(names)
+    def __init__(self, names: list[str], bag_path: Path | None = None):
+        self.running, self.bag_path = set(names), bag_path  # the recorder's bag, if any
         self.episode_over = False
         self.failure: str | None = None  # the line, once the launch is to fail
         self.quitter: str | None = None  # the first node that exited 0 before the episode end
@@ -134,7 +136,7 @@ class Supervision:
         self.running.discard(name)
         if returncode != 0:
             self.failure = self.failure or self.quit_early() or \
-                exit_description(name, returncode)
+                exit_description(name, returncode) + unfinished_bag(name, self.bag_path)
             if name == TRIAL_MANAGER and 0 < returncode != NOT_STARTED and self.running:
                 return Step(timer=self.end_grace_s())  # it sent EPISODE_END (giving way: not)
             return Step(fail=self.failure)

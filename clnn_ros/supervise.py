@@ -327,13 +327,17 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
     return status, failure is not None
 
 
+def unfinished_bag(name: str, bag_path: Path | None) -> str:
+    """What follows a failed node's line: for the recorder, how to save its bag's complete
+    chunks (a recorder that failed left its bag unfinished); '' for the others."""
+    return f"; the bag {bag_path} is not finished, its complete chunks: python -m " \
+           f"clnn_ros.bag repair {bag_path} [--out DIR]" \
+        if name == RECORDER and bag_path is not None else ""
+
+
 def report_failure(child, bag_path: Path | None = None) -> None:
-    """The one error line, at once, then the last lines of the child's stderr. A recorder that
-    failed left its bag unfinished: the line says how to save its complete chunks."""
-    repair = f"; the bag {bag_path} is not finished, its complete chunks: python -m " \
-             f"clnn_ros.bag repair {bag_path} [--out DIR]" \
-        if child.name == RECORDER and bag_path is not None else ""
-    say(f"run_all: error: {child.describe_exit()}{repair}")
+    """The one error line, at once, then the last lines of the child's stderr."""
+    say(f"run_all: error: {child.describe_exit()}{unfinished_bag(child.name, bag_path)}")
     for line in child.last_lines():
         say(f"  {child.name}| {line}")
 

@@ -211,6 +211,19 @@ def test_the_launch_ends_when_the_episode_ends_and_at_once_when_a_node_fails(exi
     assert [supervision.exited(name, code) for name, code in exits] == steps
 
 
+def test_a_recorder_that_fails_under_launch_gets_the_bag_repair_hint(tmp_path):
+    """As run_all's line (issue 37: launch gave none): the unfinished bag and how to save it."""
+    bag_path = tmp_path / "bag"
+    supervision = Supervision(GRAPH, bag_path)
+    assert supervision.exited("recorder", -9) == Step(
+        fail=f"node 'recorder' died (SIGKILL); the bag {bag_path} is not finished, its complete "
+             f"chunks: python -m clnn_ros.bag repair {bag_path} [--out DIR]")
+    assert Supervision(GRAPH, bag_path).exited("agent", -9) == Step(
+        fail="node 'agent' died (SIGKILL)")
+    planned = launch_plan.plan({"out": str(tmp_path / "out")}, tmp_path)
+    assert [node.bag_path for node in planned if node.bag_path] == [tmp_path / "out" / "bag"]
+
+
 def test_the_launch_ends_a_node_that_does_not_end():
     quit_early = Supervision(GRAPH)
     quit_early.exited("reward", 0)  # and the trial manager waits for it

@@ -37,8 +37,8 @@ class GraphFailed(Exception):
 class Supervisor:
     """launch_plan.Supervision's steps carried out with launch's actions."""
 
-    def __init__(self, names):
-        self.supervision = Supervision(names)
+    def __init__(self, names, bag_path):
+        self.supervision = Supervision(names, bag_path)
         self.timer = None
 
     def on_exit(self, name):
@@ -78,7 +78,8 @@ def graph_nodes(context):
     except BaseException:  # a refused argument (trials:=-3) leaves no directory behind
         shutil.rmtree(workdir, ignore_errors=True)
         raise
-    supervisor = Supervisor([node.executable for node in planned])
+    supervisor = Supervisor([node.executable for node in planned],
+                            next((node.bag_path for node in planned if node.bag_path), None))
     actions = [RegisterEventHandler(OnShutdown(
         on_shutdown=lambda _event, _context: shutil.rmtree(workdir, ignore_errors=True)))]
     for node in planned:
