@@ -78,12 +78,13 @@ class Grace:
 
     def __init__(self, pid: int):
         self.pid, self.began, self.waited = pid, time.monotonic(), waited_for_cpu_s(pid)
-        self.looked_at, self.stopped_s = self.began, 0.0
+        self.looked_at, self.stopped_s, self.seen_stopped = self.began, 0.0, False
 
     def elapsed(self) -> float:
         now = time.monotonic()
         if stopped(self.pid):
             self.stopped_s += now - self.looked_at
+            self.seen_stopped = True
         self.looked_at = now
         return now - self.began - self.stopped_s - (waited_for_cpu_s(self.pid) - self.waited)
 
@@ -207,10 +208,12 @@ class Supervisor:
             told = []
 
             def allowed() -> bool:
-                if not told and stopped(child.process.pid):
-                    told.append(say(f"run_all: node {child.name} is stopped (SIGSTOP?): waiting "
-                                    f"for it to continue (kill -CONT {child.process.pid})"))
-                return grace.elapsed() < grace_s
+                within = grace.elapsed() < grace_s
+                if grace.seen_stopped and not told:
+                    told.append(child.name)
+                    say(f"run_all: node {child.name} is stopped (SIGSTOP?): waiting for it to "
+                        f"continue (kill -CONT {child.process.pid})")
+                return within
             if child.wait_while(allowed):
                 continue
             if child.shows_stacks:  # where it hangs, in the run's log
