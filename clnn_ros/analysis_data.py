@@ -1,6 +1,7 @@
 """What the analysis reads of a bag (clnn_ros.analyze): the run's parameters from its metadata
-record, its trial events and weight snapshots, each per-tick topic's ticks (each
-message's tick) and the raw states, spikes, rewards and actions, and one trial's series."""
+record, run_all's notes in metadata.yaml (how far the run went), its trial events and weight
+snapshots, each per-tick topic's ticks (each message's tick) and the raw states, spikes, rewards
+and actions, and one trial's series."""
 
 from __future__ import annotations
 
@@ -9,7 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .bag import Decoder, begins_with_a_stamp, iter_raw, mcap_file, open_bag, tick_of
+from .bag import (Decoder, begins_with_a_stamp, iter_raw, mcap_file, metadata_notes, open_bag,
+                  tick_of)
 from .core.params import ParamError, Params, params_from_strings
 from .graph.fields import END, FAILURE_REASONS, REACHED_MAX_STEPS, START, tick_nanoseconds
 from .graph.names import (ACTION, INPUT_LABELS, PER_TICK, REWARD, SPIKES, STATE, TOPIC_TYPES,
@@ -92,7 +94,7 @@ def read_bag(path: Path, salvage: bool):
                     schemas[topic] = schema
     return dict(params=params, given=given, record=record, events=events, weights=weights,
                 ticks=ticks, raw=raw, schemas=schemas, counts=counts, decode=decode,
-                recorded_as=recorded_as, labels=labels)
+                recorded_as=recorded_as, labels=labels, notes=metadata_notes(path))
 
 
 def end_reason(state) -> str:

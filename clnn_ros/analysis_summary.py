@@ -9,6 +9,7 @@ import numpy as np
 
 from .analysis_data import gaps, input_labels
 from .graph.names import PER_TICK, TOPIC_TYPES, absolute
+from .graph.ticks import RUN_END_NOTE, RUN_LAST_TICK_NOTE
 
 # What each picture shows, for summary.md ({trial}: the chosen trial; trial_N.gif: ANIMATION).
 PICTURES = {
@@ -72,16 +73,39 @@ def environment_lines(data: dict, labels: list[str]) -> list[str]:
             f"* velocity edge: {velocity}"]
 
 
-def bag_short_of_the_run(ticks: dict, end) -> list[str]:
-    """A line when a per-tick topic's last tick in the bag comes before the episode's end (its
-    EPISODE_END's tick: the last trial's last tick, or the tick an early end waited for)."""
+def run_end(end, notes: dict) -> tuple[str, int | None, str]:
+    """How the run ended, its last tick (None: unknown) and where that is from: run_all's note in
+    metadata.yaml (exact, and there even when the recorder missed the episode's end), else the
+    EPISODE_END in the bag (the last trial's last tick, or the tick an early end waited for)."""
+    try:
+        last = int(notes[RUN_LAST_TICK_NOTE])
+        return notes[RUN_END_NOTE], last, "run_all's note in metadata.yaml"
+    except (KeyError, ValueError):
+        pass
+    if end is not None:
+        return end.end_reason, end.tick - 1, "the bag's EPISODE_END"
+    return "", None, ""
+
+
+def bag_short_of_the_run(ticks: dict, run_last: int | None, source: str) -> list[str]:
+    """A line when a per-tick topic's last tick in the bag comes before the run's last tick."""
     last = {topic: max(ticks[topic], default=-1) for topic in PER_TICK if topic in ticks}
-    if end is None or not last or min(last.values()) >= end.tick - 1:
+    if run_last is None or not last or min(last.values()) >= run_last:
         return []
     topic = min(last, key=last.get)
-    return [f"* **the bag ends before the run**: `{topic}` up to tick {last[topic]}, the episode "
-            f"to tick {end.tick} (the recorder fell behind or stopped: the bag lacks ticks "
-            f"{last[topic] + 1}-{end.tick})"]
+    return [f"* **the bag ends before the run**: `{topic}` up to tick {last[topic]}, the run to "
+            f"tick {run_last} ({source}; the recorder fell behind or stopped: the bag lacks ticks "
+            f"{last[topic] + 1}-{run_last})"]
+
+
+def how_it_ended(end, reason: str, run_last: int | None) -> str:
+    if end is not None:
+        return f"EPISODE_END, `{end.end_reason}` at tick {end.tick}"
+    if run_last is not None:
+        return (f"`{reason}` after tick {run_last}, as run_all noted in metadata.yaml; the bag "
+                f"holds no EPISODE_END (the recorder missed the episode's end)")
+    return ("no EPISODE_END in the bag (interrupted, or the recorder stopped before the run did): "
+            "how far the run went is not in the bag; its trials.csv says")
 
 
 def summary_markdown(bag_path: Path, result: dict, salvage: bool) -> str:
@@ -91,6 +115,7 @@ def summary_markdown(bag_path: Path, result: dict, salvage: bool) -> str:
     params = data["params"]
     cap = params.max_steps
     end = result["episode_end"]
+    reason, run_last, source = run_end(end, data["notes"])
     inputs = result["final"].shape[2] if result["final"] is not None else params.n_inputs
     lines = [f"# Analysis of `{bag_path.name}`", "",
              "Rebuilt from the bag alone by `python -m clnn_ros.analyze`"
@@ -99,11 +124,8 @@ def summary_markdown(bag_path: Path, result: dict, salvage: bool) -> str:
              "## Run", "",
              f"* seed {result['seed']}, step cap {cap:,}",
              *environment_lines(data, input_labels(data, inputs)),
-             "* how it ended: " + (f"EPISODE_END, `{end.end_reason}` at tick {end.tick}" if end
-                                    else "no EPISODE_END in the bag (interrupted, or the "
-                                         "recorder stopped before the run did): how far the "
-                                         "run went is not in the bag; its trials.csv says"),
-             *bag_short_of_the_run(data["ticks"], end),
+             "* how it ended: " + how_it_ended(end, reason, run_last),
+             *bag_short_of_the_run(data["ticks"], run_last, source),
              f"* trials completed: {len(rows)}" + (
                  f"; mean successful steps {np.mean(steps):.1f}, best {max(steps):,}, last "
                  f"{steps[-1]:,}" if rows else ""),

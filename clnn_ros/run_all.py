@@ -39,7 +39,8 @@ from .files import cannot_create
 from .graph.fields import COMPLETED
 from .graph.names import NOT_STARTED, PER_TICK, RECORDER, TRIAL_MANAGER, namespace_problem
 from .graph.run import DEMO, ENVIRONMENTS, OWN_TAU, RUN_SETTINGS, default_bag_path, run_values
-from .graph.ticks import TICKS_RECORD, TickRanges, describe_ranges
+from .graph.ticks import (RUN_END_NOTE, RUN_LAST_TICK_NOTE, TICKS_RECORD, TickRanges,
+                          describe_ranges)
 from .init_weights import OPTIMAL, episode_start
 from .process_signals import STOP_SIGNALS, catch_signals
 from .rosenv import domain_id_problem
@@ -302,6 +303,8 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
         # The ticks the run completed: an episode ended early leaves its last tick unfinished
         # (a stall's is missing by definition); Ctrl-C's last messages may be in flight.
         done = summary.get("ticks", 0) - (summary.get("exit_reason") != COMPLETED)
+        if summary.get("exit_reason") is not None and finished:
+            note_run(bag_path, summary["exit_reason"], done)
         if summary.get("exit_reason") not in (None, "interrupted") and finished and done > 0 \
                 and (lacking := bag_lacks(bag_path, done)):
             say(f"run_all: warning: the bag lacks {lacking} (the run's ticks: 0-{done - 1}, "
@@ -323,6 +326,16 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
         say(f"run_all: error: {reason}")
         return 1
     return 0
+
+
+def note_run(bag_path: Path, exit_reason: str, done: int) -> None:
+    """Note in the bag how far the run went: the bag then says so even where the recorder missed
+    the episode's end (stopped, or behind when the graph stalled)."""
+    try:
+        bag.note_in_metadata(bag_path, {RUN_END_NOTE: exit_reason, RUN_LAST_TICK_NOTE: done - 1})
+    except (OSError, yaml.YAMLError, KeyError, TypeError) as error:
+        say(f"run_all: warning: could not note the run's end in {bag_path / bag.METADATA_FILE}: "
+            f"{error}")
 
 
 def bag_lacks(bag_path: Path, ticks: int) -> str:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import array
 import csv
+import json
 import math
 import os
 import shutil
@@ -181,7 +182,10 @@ def test_rosbags_reads_and_converts_a_run(ros_env, tmp_path):
     recorded = tmp_path / "bag"
     info = yaml.safe_load((recorded / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     assert info["version"] == 9 and info["storage_identifier"] == "mcap"
-    assert info["relative_file_paths"] == ["bag_0.mcap"] and info["custom_data"] is None
+    assert info["relative_file_paths"] == ["bag_0.mcap"]
+    ticks = json.loads((tmp_path / "summary.json").read_text())["ticks"]
+    assert info["custom_data"] == {"clnn_ros.run_end": "completed",  # noted by run_all
+                                   "clnn_ros.run_last_tick": str(ticks - 1)}
     assert {t["topic_metadata"]["name"] for t in info["topics_with_message_count"]} == \
         {names.absolute(t) for t in names.TOPIC_TYPES}
     for topic in info["topics_with_message_count"]:

@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 
 import pytest
+import yaml
 
 from clnn_ros import bag, rosenv
 from clnn_ros.core.episode import run_episode
@@ -185,14 +186,18 @@ def test_a_recorder_stopped_past_the_stall_timeout_finishes_its_bag_and_the_lack
         stderr[-3000:]
     assert lines[-2].startswith("run_all: warning: the bag lacks ticks "), stderr[-3000:]
     assert not any("terminated" in line or "killed" in line for line in lines), stderr[-3000:]
-    assert (tmp_path / "bag" / "metadata.yaml").is_file()  # finished, not repaired
+    metadata = yaml.safe_load((tmp_path / "bag" / "metadata.yaml").read_text())  # finished
+    notes = metadata["rosbag2_bagfile_information"]["custom_data"]  # how far the run went
+    ticks = json.loads((tmp_path / "summary.json").read_text())["ticks"]
+    assert notes == {"clnn_ros.run_end": lines[-1].removeprefix("run_all: error: "),
+                     "clnn_ros.run_last_tick": str(ticks - 2)}, notes  # its last tick unfinished
     analysis = subprocess.run([sys.executable, "-m", "clnn_ros.analyze", str(tmp_path / "bag"),
                                "--out", str(tmp_path / "analysis")], env=ros_env,
                               capture_output=True, text=True, timeout=300)
     assert analysis.returncode == 0, analysis.stderr
     summary = (tmp_path / "analysis" / "summary.md").read_text()
-    assert "how far the run went is not in the bag" in summary or \
-        "the bag ends before the run" in summary, summary
+    assert f"the run to tick {ticks - 2} (run_all's note in metadata.yaml" in summary, summary
+    assert "**the bag ends before the run**" in summary, summary
 
 
 @pytest.mark.parametrize("allowed", [False, True], ids=["refused", "allowed"])

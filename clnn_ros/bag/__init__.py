@@ -15,13 +15,14 @@ one MCAP file NAME/NAME_0.mcap (profile ros2):
   (its first field, read by `tick_of`), /clock's its stamp;
 * `rosbag2` metadata records (serialized_metadata: one when the bag opens, the final one when it
   is closed, as rosbag2's writer does) and a `clnn_ros` record with the run's parameters;
+* metadata.yaml's `custom_data`: run_all's notes of how far the run went, added once it ended;
 * zstd chunks closed every CHUNK_SECONDS (or CHUNK_BYTES) and written through to the file, so a
   recorder killed with SIGKILL loses at most the open chunk: `repair` makes a finalized copy of
   the complete ones, `open_bag(salvage=True)` reads them as they are.
 
     directory  a bag directory's own files
     schemas    the installed message types: class, ros2msg schema, type hash
-    writer     BagWriter and the metadata it writes
+    writer     BagWriter and the metadata it writes; notes added to metadata.yaml later
     reader     open_bag, iter_raw, Decoder
     repair     a finalized copy of a killed recorder's bag
 
@@ -33,8 +34,9 @@ from .directory import METADATA_FILE, foreign_files, remove_bag
 from .reader import (BagError, Decoder, begins_with_a_stamp, iter_raw, mcap_file, metadata,
                      open_bag, tick_of)
 from .schemas import message_class, schema_text, type_hash
-from .writer import CHUNK_SECONDS, BagWriter, qos_dicts
+from .writer import CHUNK_SECONDS, BagWriter, metadata_notes, note_in_metadata, qos_dicts
 
 __all__ = ["METADATA_FILE", "foreign_files", "remove_bag", "BagError", "Decoder",
            "begins_with_a_stamp", "iter_raw", "mcap_file", "metadata", "open_bag", "tick_of",
-           "message_class", "schema_text", "type_hash", "CHUNK_SECONDS", "BagWriter", "qos_dicts"]
+           "message_class", "schema_text", "type_hash", "CHUNK_SECONDS", "BagWriter",
+           "metadata_notes", "note_in_metadata", "qos_dicts"]

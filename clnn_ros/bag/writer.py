@@ -174,3 +174,23 @@ class BagWriter:
         if finalize:
             write_text_atomically(self.directory / METADATA_FILE, dump_yaml(
                 {"rosbag2_bagfile_information": self.metadata()}) + "\n")
+
+
+def note_in_metadata(directory: Path, notes: dict[str, str]) -> None:
+    """Add `notes` to a finished bag's metadata.yaml as rosbag2's `custom_data` (a map of strings
+    that `ros2 bag info` and bag readers keep): what was learnt only after the bag was closed."""
+    path = Path(directory) / METADATA_FILE
+    document = yaml.safe_load(path.read_text())
+    information = document["rosbag2_bagfile_information"]
+    information["custom_data"] = {**(information.get("custom_data") or {}),
+                                  **{str(k): str(v) for k, v in notes.items()}}
+    write_text_atomically(path, dump_yaml(document) + "\n")
+
+
+def metadata_notes(directory: Path) -> dict[str, str]:
+    """A bag's metadata.yaml `custom_data` ({} where it has none or no readable metadata.yaml)."""
+    try:
+        document = yaml.safe_load((Path(directory) / METADATA_FILE).read_text())
+        return dict(document["rosbag2_bagfile_information"].get("custom_data") or {})
+    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError):
+        return {}

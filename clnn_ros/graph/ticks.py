@@ -8,6 +8,10 @@ import bisect
 
 # The bag's metadata record of the ticks each per-tick topic holds: {topic: JSON ranges}.
 TICKS_RECORD = "clnn_ros_ticks"
+# How far the run went, noted by run_all in the bag's metadata.yaml (custom_data) once the run has
+# ended: the bag holds it even when the recorder missed the episode's end.
+RUN_END_NOTE = "clnn_ros.run_end"              # the run's exit reason (summary.json's)
+RUN_LAST_TICK_NOTE = "clnn_ros.run_last_tick"  # the last tick the run completed
 
 
 class TickRanges:
