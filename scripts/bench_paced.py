@@ -1,6 +1,8 @@
-"""The benchmark's 50 Hz run (scripts/benchmark_graph.py), paced by the environment as a robot's
-control loop paces it: `run_all --env-node "python scripts/benchmark_graph.py paced-env ..."`,
-idle and beside CPU hogs, with how busy the machine was meanwhile."""
+"""The benchmark's 50 Hz run (scripts/benchmark_graph.py), paced as a user paces a run at robot
+speed: `run_all --rate 50` (the trial manager releases at most one tick per 20 ms period of a
+steady timer), with the environment node of this script timing each tick (`run_all --env-node
+"python scripts/benchmark_graph.py timed-env ..."`); idle and beside CPU hogs, with how busy the
+machine was meanwhile."""
 
 from __future__ import annotations
 
@@ -24,58 +26,42 @@ HOG = ("import sys, time\nend = time.monotonic() + float(sys.argv[1])\n"
 BENCHMARK = REPO / "scripts" / "benchmark_graph.py"
 
 
-def paced_env(argv: list[str]) -> int:
+def timed_env(argv: list[str]) -> int:
     """The environment node of the 50 Hz run, as run_all --env-node starts it:
-    `paced-env --out FILE [--period-ms 20] --ros-args ...`. The paper's cart-pole
-    (EnvironmentNode), but each state goes out at the first slot of a wall-clock grid of
-    `period` (anchored at state 0) after its inputs are in, as a robot's control loop
-    publishes; the node waits for its slot inside the callback (it has nothing else to do). It
-    notes when each state went out and when the agent's action of that tick came in, and writes
-    them to FILE at the end: {"period_ns", "ticks": [[tick, slot, published_ns, answered_ns or
-    null], ...]} (time.monotonic_ns, the same clock in every process)."""
+    `timed-env --out FILE --ros-args ...`. The paper's cart-pole (EnvironmentNode), noting when
+    each state went out and when the agent's action of that tick came in; it writes them to FILE
+    at the end: {"ticks": [[tick, published_ns, answered_ns or null], ...]} (time.monotonic_ns,
+    the same clock in every process)."""
     split = argv.index("--ros-args") if "--ros-args" in argv else len(argv)
-    parser = argparse.ArgumentParser(prog="benchmark_graph.py paced-env")
+    parser = argparse.ArgumentParser(prog="benchmark_graph.py timed-env")
     parser.add_argument("--out", type=Path, required=True)
-    parser.add_argument("--period-ms", type=float, default=PERIOD_MS)
     own = parser.parse_args(argv[:split])
-    period_ns = round(own.period_ms * 1e6)
 
     from clnn_ros.nodes.environment import EnvironmentNode
     from clnn_ros.nodes.glue import run_node
 
-    class PacedEnvironmentNode(EnvironmentNode):
+    class TimedEnvironmentNode(EnvironmentNode):
         def __init__(self, run: dict):
             super().__init__(run)
-            self.state_pub = Publishing(self.state_pub, self.wait_for_slot)
-            self.first_ns = None
-            self.slot = -1
-            self.published = {}  # tick: (slot, ns)
+            self.state_pub = Publishing(self.state_pub, self.note_publication)
+            self.published = {}  # tick: ns
             self.answered = {}   # tick: ns, when the action of the tick came in
 
-        def wait_for_slot(self, state) -> None:
-            now = time.monotonic_ns()
-            if self.first_ns is None:
-                self.first_ns, slot = now, 0
-            else:  # the first slot not before now, after the last one used
-                slot = max(self.slot + 1, -(-(now - self.first_ns) // period_ns))
-                while (wait := self.first_ns + slot * period_ns - time.monotonic_ns()) > 0:
-                    time.sleep(wait / 1e9)
-            self.slot = slot
-            self.published[state.tick] = (slot, time.monotonic_ns())
+        def note_publication(self, state) -> None:
+            self.published[state.tick] = time.monotonic_ns()
 
         def on_action(self, action) -> None:
             self.answered.setdefault(action.tick, time.monotonic_ns())
             super().on_action(action)
 
     made = []
-    status = run_node(lambda run: made.append(PacedEnvironmentNode(run)) or made[-1],
+    status = run_node(lambda run: made.append(TimedEnvironmentNode(run)) or made[-1],
                       [sys.argv[0], *argv[split:]])
     if made:
         node = made[0]
         own.out.parent.mkdir(parents=True, exist_ok=True)
-        own.out.write_text(json.dumps({"period_ns": period_ns, "ticks": [
-            [tick, slot, ns, node.answered.get(tick)]
-            for tick, (slot, ns) in sorted(node.published.items())]}))
+        own.out.write_text(json.dumps({"ticks": [
+            [tick, ns, node.answered.get(tick)] for tick, ns in sorted(node.published.items())]}))
     return status
 
 
@@ -124,11 +110,10 @@ def paced_run(bench, hogs: int) -> dict:
     after it in any case)."""
     out = bench.out_dir(f"paced_{hogs}")
     record = out.with_name(out.name + "_paced.json")
-    env_node = (f"python {shlex.quote(str(BENCHMARK))} paced-env "
-                f"--period-ms {PERIOD_MS:g} --out {shlex.quote(str(record))}")
+    env_node = f"python {shlex.quote(str(BENCHMARK))} timed-env --out {shlex.quote(str(record))}"
     cmd = [sys.executable, "-m", "clnn_ros.run_all", "--quiet", "--trials",
            str(bench.sizes["paced_trials"]), "--seed", str(SEED), "--out", str(out),
-           "--env-node", env_node]
+           "--rate", f"{1000 / PERIOD_MS:g}", "--env-node", env_node]
     procs = []
     try:
         for _ in range(hogs):
@@ -151,16 +136,16 @@ def paced_run(bench, hogs: int) -> dict:
     summary = json.loads((out / "summary.json").read_text())
     if summary["exit_reason"] != "completed":
         raise RuntimeError(f"paced run did not complete: {summary}")
-    data = json.loads(record.read_text())
-    period = data["period_ns"]
-    ticks = data["ticks"]
-    latencies = [(a - p) / 1e6 for _t, _s, p, a in ticks if a is not None]
-    slots = [s for _t, s, _p, _a in ticks]
-    busy = sampler.busy_cores(ticks[0][2], ticks[-1][2]) if ticks else float("nan")
+    ticks = json.loads(record.read_text())["ticks"]
+    latencies = [(a - p) / 1e6 for _t, p, a in ticks if a is not None]
+    period_ns = PERIOD_MS * 1e6
+    # The pace's periods that passed without a tick: a tick whose round trip overran its period
+    # is released at the next one. From the span (each state goes out within its period).
+    span = ticks[-1][1] - ticks[0][1] if ticks else 0
+    late = max(0, round(span / period_ns) - (len(ticks) - 1))
+    busy = sampler.busy_cores(ticks[0][1], ticks[-1][1]) if ticks else float("nan")
     return dict(hogs=hogs, ticks=len(ticks), summary=summary, run_s=wall, busy=busy,
                 answered=len(latencies),
-                within=sum(1 for _t, _s, p, a in ticks
+                within=sum(1 for _t, p, a in ticks
                            if a is not None and a - p <= DEADLINE_MS * 1e6),
-                latency_ms=latencies,
-                late=sum(b - a - 1 for a, b in zip(slots, slots[1:])),
-                span_s=(slots[-1] - slots[0]) * period / 1e9 if slots else 0.0)
+                latency_ms=latencies, late=late, span_s=span / 1e9)

@@ -238,19 +238,19 @@ def report(rows, paced, ser, composed, separate, sizes, quick, elapsed, loads, s
     lines.append("")
 
     lines += [
-        f"## {1000 / PERIOD_MS:g} Hz, paced by the environment",
+        f"## {1000 / PERIOD_MS:g} Hz (`--rate {1000 / PERIOD_MS:g}`), as a robot runs it",
         "",
-        "As a robot runs it: `python -m clnn_ros.run_all --quiet --seed 1 --trials "
-        f"{sizes['paced_trials']} --env-node \"python scripts/benchmark_graph.py paced-env "
-        f"--period-ms {PERIOD_MS:g} --out FILE\"` (5 processes, EventsExecutor, the recorder on "
-        "as by default). The environment node of the script (`paced-env`: the project's "
-        "`EnvironmentNode` with its state publication paced) publishes state(t) at the first "
-        f"slot of a {PERIOD_MS:g} ms wall-clock grid (anchored at state 0) once its inputs "
-        "clock(t) and action(t-1) are in, waiting for the slot inside its callback; a tick "
-        "whose inputs come after its slot goes out at the next free slot (a *late slot*). For "
-        "each tick it notes the time just before publishing state(t) and the time the agent's "
-        "action(t) reaches its callback (time.monotonic_ns): the latency state -> action "
-        "(environment -> encoder and reward -> agent -> environment: 3 hops). "
+        "As a user runs the graph at robot speed: `python -m clnn_ros.run_all --quiet --seed 1 "
+        f"--trials {sizes['paced_trials']} --rate {1000 / PERIOD_MS:g} --env-node \"python "
+        "scripts/benchmark_graph.py timed-env --out FILE\"` (5 processes, EventsExecutor, the "
+        "recorder on as by default). The trial manager releases at most one tick per "
+        f"{PERIOD_MS:g} ms period of a steady timer: a tick whose round trip overran its "
+        "period goes out at the next one (a *late period*, counted from the span of the "
+        "states' times). The environment node of the script (`timed-env`: the project's "
+        "`EnvironmentNode`, timing its ticks) notes for each tick the time just before "
+        "publishing state(t) and the time the agent's action(t) reaches its callback "
+        "(time.monotonic_ns): the latency state -> action (environment -> encoder and "
+        "reward -> agent -> environment: 3 hops). "
         f"*Within {DEADLINE_MS:g} ms*: the share of all ticks whose action came back within "
         f"{DEADLINE_MS:g} ms of its state (a tick whose action never came counts as missed). "
         f"*Hogs*: {HOGS} processes `python -c 'while ...: pass'` (2 x cores, at least 4; each "
@@ -258,7 +258,7 @@ def report(rows, paced, ser, composed, separate, sizes, quick, elapsed, loads, s
         "after it, at the graph's priority.",
         "",
         f"| condition | ticks | within {DEADLINE_MS:g} ms | p50 ms | p99 ms | max ms | "
-        "late slots | run_all wall s | busy cores |",
+        "late periods | run_all wall s | busy cores |",
         "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for p in paced:

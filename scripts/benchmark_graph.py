@@ -1,6 +1,6 @@
 """Benchmark of the ROS 2 node graph against a raw DDS lockstep ring of the same shape, all
-measured in this one run: throughput as ratios, per-tick latency, a 50 Hz run paced by the
-environment (as a robot runs it), idle and under CPU hogs, and a profile of the graph.
+measured in this one run: throughput as ratios, per-tick latency, a 50 Hz run (`--rate 50`, as
+a robot runs it), idle and under CPU hogs, and a profile of the graph.
 
     ROS_DOMAIN_ID=N python scripts/benchmark_graph.py [--out docs/benchmark_graph.md] [--quick]
 
@@ -40,13 +40,14 @@ the ring's, the benchmark's own).
    through the graph), timed by bench_node.py through the trial manager's public attributes:
    its clock publisher (clock_pub) and its TickJoin's completion (join.complete). p50, p99,
    max.
-3. 50 Hz paced by the environment (bench_paced.py): `run_all --env-node "python <this script> paced-env ..."`
-   (the recorder on, as run_all runs by default); the environment node (EnvironmentNode, with
-   its state publication paced) publishes state(t) at the first slot of a 20 ms wall-clock grid
-   after its inputs are in; for every tick, the time from publishing state(t) to receiving the
-   agent's action(t) in the environment node: the share within 20 ms, p50, p99, max; idle, and
-   with 2 x cores (at least 4) busy `python` processes, killed afterwards (and each ends by
-   itself after a time limit in any case).
+3. 50 Hz, as a user runs the graph at robot speed (bench_paced.py): `run_all --rate 50
+   --env-node "python <this script> timed-env ..."` (the recorder on, as run_all runs by
+   default): the trial manager releases at most one tick per 20 ms period of a steady timer;
+   the environment node (EnvironmentNode, timing its ticks) notes for every tick the time from
+   publishing state(t) to receiving the agent's action(t): the share within 20 ms, p50, p99,
+   max, and the periods that passed without a tick; idle, and with 2 x cores (at least 4) busy
+   `python` processes, killed afterwards (and each ends by itself after a time limit in any
+   case).
 
 Profiles (EventsExecutor, bench_profile.py): the composed graph under cProfile from the trial
 manager's first clock to its stop (bench_node.py wraps its publish_clock and stop), and one
@@ -67,7 +68,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from bench_paced import HOGS, paced_env, paced_run
+from bench_paced import HOGS, paced_run, timed_env
 from bench_processes import Bench
 from bench_profile import profile_composed, profile_separate, serialization_cost
 from bench_report import percentiles, report
@@ -153,8 +154,8 @@ def main_benchmark(a) -> int:
 
 
 def main() -> int:
-    if len(sys.argv) > 1 and sys.argv[1] == "paced-env":  # run_all --env-node (ROS arguments)
-        return paced_env(sys.argv[2:])
+    if len(sys.argv) > 1 and sys.argv[1] == "timed-env":  # run_all --env-node (ROS arguments)
+        return timed_env(sys.argv[2:])
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     sub = parser.add_subparsers(dest="mode")
     for mode in ("ring-stage", "ring-composed"):
@@ -165,7 +166,7 @@ def main() -> int:
         p.add_argument("--msgs", choices=("uint64", "typed"), default="uint64")
         if mode == "ring-stage":
             p.add_argument("--role", choices=ROLES, required=True)
-    sub.add_parser("paced-env", help="internal: the environment node of the paced run "
+    sub.add_parser("timed-env", help="internal: the environment node of the 50 Hz run "
                                      "(run_all --env-node)")
     parser.add_argument("--out", type=Path, help="the report (default docs/benchmark_graph.md; "
                         "none with --quick)")
