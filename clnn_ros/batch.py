@@ -35,9 +35,10 @@ from numba.extending import intrinsic, register_jitable
 from .core import encoder, jitable, params, physics, random_stream, rln
 from .core import rule as rule_values
 from .core.encoder import Encoder, encode_active
-from .core.episode import angle_grid, seed_setup
+from .core.episode import angle_grid, first_angle, seed_setup, trial_starts
 from .core.params import Params
-from .core.physics import CONTINUE, cartpole_step, physics_constants, trial_start_state
+from .core.physics import (CONTINUE, in_degrees, physics_constants, physics_step, start_in_units,
+                           state_in_radians, trial_start_state)
 from .core.rln import (NEVER, NONE, TIE_RANDOM, Rule, explore, infer, outcome, rerandomize,
                        response_space, restart_counters, tag_action_path, trial_start_count,
                        update)
@@ -53,23 +54,26 @@ STALE = -1  # a cached decision made before the weights last changed
 
 
 # ---- one lane: one seed's episode, tick by tick ------------------------------------------------
-# A lane is a tuple of arrays: (weights, angles, steps_out, status_out, random_state) of its seed
+# A lane is a tuple of arrays: (weights, starts, steps_out, status_out, random_state) of its seed
 # and its own scratch (decisions, punish_tagged_at, reward_tagged_at, eligible, active,
 # responses). Its clock is a tuple of scalars: (x, x_dot, theta, theta_dot, t, trial, successes,
-# now). The setting, shared by all lanes: (constants, force, components, edges, offsets, radix,
-# max_steps, released, rule, learn).
+# now), the state in the physics' own units (core.physics: degrees, or radians for gymnasium).
+# The setting, shared by all lanes: (constants, force, components, edges, offsets, radix,
+# max_steps, released, rule, learn, radians).
 
 @register_jitable
 def _start_trial(lane, clock, setting):
     """Trial clock[5] of the lane's seed begins (the core's begin_trial and reset)."""
-    weights, angles, _, _, rng, decisions, punish_tagged_at, reward_tagged_at, eligible, _, _ = lane
-    constants, _, _, _, _, _, _, released, rule, learn = setting
+    weights, starts, _, _, rng, decisions, punish_tagged_at, reward_tagged_at, eligible, _, _ = lane
+    constants, _, _, _, _, _, _, released, rule, learn, radians = setting
     _, _, _, _, _, trial, successes, now = clock
     restart_counters(punish_tagged_at, reward_tagged_at, eligible, rule)
     if learn and rerandomize(weights, trial, rule, rng):
         decisions[:, 0] = STALE
     successes = trial_start_count(successes, rule)
-    x, x_dot, theta, theta_dot = trial_start_state(angles[trial], released, constants)
+    start = starts[trial]
+    x, x_dot, theta, theta_dot = trial_start_state(start[0], start[1], start[2], start[3],
+                                                   released, constants, radians)
     return x, x_dot, theta, theta_dot, np.int64(0), trial, successes, now
 
 
@@ -90,9 +94,10 @@ def _act(lane, clock, setting):
     """The first part of a tick (the core's RLNAgent.infer and explore): the spiking inputs of
     the lane's state and the acting neuron. Returns (neuron, the input pattern's number)."""
     weights, rng, decisions, active, responses = lane[0], lane[4], lane[5], lane[9], lane[10]
-    _, _, components, edges, offsets, radix, _, _, rule, _ = setting
+    _, _, components, edges, offsets, radix, _, _, rule, _, radians = setting
     x, x_dot, theta, theta_dot = clock[:4]
-    encode_active((x, x_dot, theta, theta_dot), components, edges, offsets, active)
+    encode_active(in_degrees(x, x_dot, theta, theta_dot, radians), components, edges, offsets,
+                  active)
     pattern = 0  # mixed-radix number of the spiking inputs
     for v in range(active.shape[0]):
         pattern = pattern * radix[v] + active[v] - offsets[v]
@@ -107,9 +112,10 @@ def _act(lane, clock, setting):
 @register_jitable(forceinline=True)
 def _step(clock, neuron, setting):
     """The physics step of a tick: (x, x_dot, theta, theta_dot, status)."""
-    constants, force = setting[:2]
+    constants, force, radians = setting[0], setting[1], setting[10]
     x, x_dot, theta, theta_dot = clock[:4]
-    return cartpole_step(x, x_dot, theta, theta_dot, force if neuron == 1 else -force, constants)
+    return physics_step(x, x_dot, theta, theta_dot, force if neuron == 1 else -force, constants,
+                        radians)
 
 
 @register_jitable(forceinline=True)
@@ -141,7 +147,7 @@ def _settle(lane, clock, kind, status, setting):
     """The rest of the tick that _learn left: RLNAgent.learn with a reward kind other than NONE;
     at the end of a trial its results are written and the next trial begins. Returns (clock,
     whether the seed is done)."""
-    (weights, angles, steps_out, status_out, _, decisions, punish_tagged_at, reward_tagged_at,
+    (weights, starts, steps_out, status_out, _, decisions, punish_tagged_at, reward_tagged_at,
      eligible, active, _) = lane
     max_steps, rule, learn = setting[6], setting[8], setting[9]
     x, x_dot, theta, theta_dot, t, trial, successes, now = clock
@@ -154,7 +160,7 @@ def _settle(lane, clock, kind, status, setting):
         return clock, False
     steps_out[trial] = t
     status_out[trial] = status
-    if trial + 1 == angles.shape[0]:
+    if trial + 1 == starts.shape[0]:
         return clock, True
     return _start_trial(lane, (x, x_dot, theta, theta_dot, t, trial + 1, successes, now),
                         setting), False
@@ -207,9 +213,9 @@ def _take_next(typingctx, counter):
 @register_jitable
 def _lane(k, episodes, scratch):
     """The lane that runs seed k (row k of the episodes' arrays) in this scratch."""
-    weights, angles, steps_out, status_out, rng = episodes
+    weights, starts, steps_out, status_out, rng = episodes
     decisions, punish_tagged_at, reward_tagged_at, eligible, active, responses = scratch
-    return (weights[k], angles[k], steps_out[k], status_out[k], rng[k], decisions,
+    return (weights[k], starts[k], steps_out[k], status_out[k], rng[k], decisions,
             punish_tagged_at, reward_tagged_at, eligible, active, responses)
 
 
@@ -258,12 +264,12 @@ def _work(taken, episodes, setting, scratch_a, scratch_b):
 
 
 @numba.njit(parallel=True, cache=True)
-def _run_many(weights, angles, constants, force, components, edges, offsets, max_steps,
-              released, rule, learn, rng, steps_out, status_out, n_threads):
+def _run_many(weights, starts, constants, force, components, edges, offsets, max_steps,
+              released, rule, learn, radians, rng, steps_out, status_out, n_threads):
     """Every seed's episode in place: `weights` end as the final weights, per-trial results in
     the outputs."""
     n_seeds, n_segments, n_inputs = weights.shape[0], weights.shape[2], weights.shape[3]
-    if n_seeds == 0 or angles.shape[1] == 0:
+    if n_seeds == 0 or starts.shape[1] == 0:
         return
     n_vars = components.shape[0]
     radix = np.empty(n_vars, dtype=np.int64)  # inputs per variable
@@ -277,9 +283,9 @@ def _run_many(weights, angles, constants, force, components, edges, offsets, max
     # the threads end together, whatever the seeds' lengths and their order.
     taken = np.zeros(1, np.int64)
     for _ in numba.prange(min(n_threads, n_seeds)):
-        _work(taken, (weights, angles, steps_out, status_out, rng),
+        _work(taken, (weights, starts, steps_out, status_out, rng),
               (constants, force, components, edges, offsets, radix, max_steps, released, rule,
-               learn),
+               learn, radians),
               _scratch(n_patterns, n_segments, n_inputs, n_vars),
               _scratch(n_patterns, n_segments, n_inputs, n_vars))
 
@@ -311,7 +317,7 @@ _drop_stale_cache()
 @dataclass
 class BatchResult:
     seeds: np.ndarray  # (S,)
-    initial_angles: np.ndarray  # (S, trials) deg
+    initial_angles: np.ndarray  # (S, trials) deg: each trial's first pole angle
     steps: np.ndarray  # (S, trials) successful steps
     end_status: np.ndarray  # (S, trials)
     final_weights: np.ndarray  # (S, 2, q, n_inputs)
@@ -338,25 +344,33 @@ def distributed(distributor):
 def run_batch(seeds, p: Params, weights: np.ndarray | None = None, angles: np.ndarray | None = None,
               learn: bool = True) -> BatchResult:
     """Run one episode per seed (the core's seed protocol), in parallel over seeds.
-    `weights` (2, q, n) and `angles` (trials,) override every seed's own."""
+    `weights` (2, q, n) and `angles` (trials,: the paper's starts at these angles) override every
+    seed's own."""
     if _distributor is not None and weights is None and angles is None and learn:
         return _distributor(seeds, p)
     seeds = np.asarray(list(seeds), dtype=np.int64)
-    setups = [seed_setup(int(s), p) for s in seeds]
-    all_weights = np.stack([w if weights is None else np.asarray(weights, np.float64)
-                            for w, _ in setups])
-    all_angles = np.stack([a if angles is None else np.asarray(angles, np.float64)
-                           for _, a in setups])
+    radians = state_in_radians(p)
+    all_weights = np.stack([seed_setup(int(s), p)[0] if weights is None else
+                            np.asarray(weights, np.float64) for s in seeds]) \
+        if len(seeds) else np.zeros((0, 2, p.n_segments, p.n_inputs))
+    starts, angles_out = [], []
+    for s in seeds:
+        given, in_radians = trial_starts(int(s), p, angles)
+        starts.append([start_in_units(start, in_radians, radians is not None) for start in given])
+        angles_out.append([first_angle(start, in_radians) for start in given])
+    trials = p.trials if angles is None else len(angles)
+    all_starts = np.array(starts, dtype=np.float64).reshape(len(seeds), trials, 4)
+    initial_angles = np.array(angles_out, dtype=np.float64).reshape(len(seeds), trials)
     components, edges, offsets = Encoder.from_params(p).arrays
     rng = seeds.astype(np.uint64).reshape(-1, 1).copy()
-    steps = np.zeros(all_angles.shape, dtype=np.int64)
-    status = np.zeros(all_angles.shape, dtype=np.int64)
+    steps = np.zeros(initial_angles.shape, dtype=np.int64)
+    status = np.zeros(initial_angles.shape, dtype=np.int64)
     start = time.perf_counter()
-    _run_many(all_weights, all_angles, physics_constants(p), float(p.force), components, edges,
-              offsets, p.max_steps, p.first_action == "no_force", Rule.from_params(p), learn, rng,
-              steps, status, numba.get_num_threads())
+    _run_many(all_weights, all_starts, physics_constants(p), float(p.force), components, edges,
+              offsets, p.max_steps, p.first_action == "no_force", Rule.from_params(p), learn,
+              radians, rng, steps, status, numba.get_num_threads())
     wall = time.perf_counter() - start
-    return BatchResult(seeds, all_angles, steps, status, all_weights, wall)
+    return BatchResult(seeds, initial_angles, steps, status, all_weights, wall)
 
 
 def evaluate_weights_batch(weights: np.ndarray, p: Params) -> BatchResult:

@@ -28,7 +28,7 @@ from clnn_ros.core.episode import run_episode
 from clnn_ros.core.gym_physics import GYM_PHYSICS, gym_matched_params
 from clnn_ros.core.mujoco_physics import MujocoCartPole
 from clnn_ros.core.params import params_from_strings
-from clnn_ros.core.physics import CartPole
+from clnn_ros.core.physics import CartPole, at_rest
 from clnn_ros.core.presets import preset_values
 from clnn_ros.reproduce.common import END_REASONS, md_table, write_csv
 
@@ -127,7 +127,7 @@ def first_difference(a: np.ndarray, b: np.ndarray) -> int | None:
 # ------------------------------------------------------------------------------------------------
 def balancing_actions(steps: int) -> list[int]:
     plant = MujocoCartPole()
-    plant.reset(AGREEMENT_ANGLE_DEG)
+    plant.reset(at_rest(AGREEMENT_ANGLE_DEG))
     actions = []
     for _ in range(steps):
         _, _, theta_deg, theta_dot_deg = plant.state
@@ -138,7 +138,7 @@ def balancing_actions(steps: int) -> list[int]:
 
 def trajectory(env, actions: list[int]) -> np.ndarray:
     """(steps, 4): the state after each step of the sequence."""
-    env.reset(AGREEMENT_ANGLE_DEG)
+    env.reset(at_rest(AGREEMENT_ANGLE_DEG))
     states = []
     for action in actions:
         env.step(action)
@@ -175,7 +175,7 @@ def unstable_growth_per_second() -> float:
 
 def plant_microseconds_per_step(steps: int = 100_000) -> float:
     plant = MujocoCartPole()
-    plant.reset(0.0)
+    plant.reset(at_rest(0.0))
     start = time.perf_counter()
     for k in range(steps):
         plant.step(k & 1)  # alternating pushes keep it near upright

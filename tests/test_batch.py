@@ -6,9 +6,10 @@ import pytest
 from clnn_ros.batch import evaluate_weights_batch, run_batch
 from clnn_ros.core.episode import evaluate_weights, run_episode
 from clnn_ros.core.optimal import optimal_weights
+from clnn_ros.core.gym_physics import GYM_PHYSICS
 from clnn_ros.core.params import (DECAY_COUNTERS, E_FLAGS, FIRST_ACTION, INFERENCE, INTEGRATORS,
-                                  PHYSICS, PUNISH_TIMING, SUCCESS_COUNTER, TAGGING, TIE_BREAKS,
-                                  Params)
+                                  PHYSICS, PROTOCOLS, PUNISH_TIMING, SUCCESS_COUNTER, TAGGING,
+                                  TIE_BREAKS, Params)
 
 SEEDS = [0, 5, 11]
 # Trials capped at 600 steps: each case still earns many rewards, and the pure-Python core, the
@@ -50,12 +51,21 @@ CASES = {
     "re-randomized, exploring, random ties": (dict(nsv=2, velocity_edge=0.5, explore=0.01,
                                                    tie_break="random", rerandomize_every=3,
                                                    rerandomize_fraction=0.5), True),
+    # Gymnasium's step in radians, from the paper's starts in degrees, released first
+    "gymnasium physics": (dict(nsv=1, physics="gymnasium", first_action="no_force"), True),
+    # CartPole-v1's protocol (starts in radians, truncated at 500) on the paper's physics, and
+    # on CartPole-v1's own
+    "gymnasium protocol": (dict(nsv=1, protocol="gymnasium", max_steps=500), True),
+    "gymnasium protocol and physics": (dict(nsv=2, velocity_edge=0.5, protocol="gymnasium",
+                                            max_steps=500, sigma=16,
+                                            **{**GYM_PHYSICS, "physics": "gymnasium"}), True),
 }
 
 OPTIONS = {"tie_break": TIE_BREAKS, "tagging": TAGGING, "e_flag": E_FLAGS,
            "success_counter": SUCCESS_COUNTER, "physics": PHYSICS, "integrator": INTEGRATORS,
            "decay_counters": DECAY_COUNTERS, "first_action": FIRST_ACTION,
-           "punish_timing": PUNISH_TIMING, "inference": INFERENCE, "nsv": (1, 2, 3, 4)}
+           "punish_timing": PUNISH_TIMING, "inference": INFERENCE, "nsv": (1, 2, 3, 4),
+           "protocol": PROTOCOLS}
 
 
 @pytest.mark.parametrize("option", OPTIONS)
@@ -68,7 +78,7 @@ def test_every_option_value_is_a_rewarded_case(option):
 @pytest.mark.parametrize("case", CASES)
 def test_batch_equals_core(case):
     options, rewarded = CASES[case]
-    p = Params(trials=48, max_steps=MAX_STEPS, **options)
+    p = Params(**{"trials": 48, "max_steps": MAX_STEPS, **options})
     batch = run_batch(SEEDS, p)
     for k, seed in enumerate(SEEDS):
         core = run_episode(seed, p)

@@ -9,7 +9,7 @@ from clnn_ros.core.encoder import Encoder
 from clnn_ros.core.episode import angle_grid, run_trial, seed_setup
 from clnn_ros.core.optimal import optimal_weights
 from clnn_ros.core.params import ParamError, Params, params_from_strings
-from clnn_ros.core.physics import (CONTINUE, FAIL_POSITION, CartPole, cartpole_step,
+from clnn_ros.core.physics import (CONTINUE, FAIL_POSITION, CartPole, at_rest, cartpole_step,
                                    physics_constants)
 from clnn_ros.core.random_stream import next_uniform
 from clnn_ros.core.agent import RLNAgent, SuccessCounter
@@ -206,7 +206,7 @@ def test_calibration_b_constant_force_leaves_track_in_32_steps():
 def test_correct_physics_drops_the_pole_about_eight_times_faster():
     def fall_steps(physics):
         env, steps = CartPole(Params(physics=physics)), 0
-        env.reset(1.5)
+        env.reset(at_rest(1.5))
         while env.step_force(0.0) == CONTINUE:
             steps += 1
         return steps
@@ -217,7 +217,7 @@ def test_correct_physics_drops_the_pole_about_eight_times_faster():
 
 def test_sign_convention_plus_force_tilts_pole_back():
     env = CartPole(Params())
-    env.reset(0.0)
+    env.reset(at_rest(0.0))
     env.step(1)
     x, x_dot, theta, theta_dot = env.state
     assert x_dot > 0 and theta_dot < 0
@@ -228,7 +228,7 @@ def test_optimal_1sv_weights_hold_the_pole_near_zero():
     agent = RLNAgent(p, optimal_weights(1))
     env, encoder, counter = CartPole(p), Encoder.from_params(p), SuccessCounter(p)
     angles = []
-    steps, status = run_trial(agent, counter, env, encoder, angle_grid(p)[16], p, learn=False,
+    steps, status = run_trial(agent, counter, env, encoder, at_rest(angle_grid(p)[16]), p, learn=False,
                               trace=lambda s: angles.append(s[2]))
     assert (steps, status) == (10_000, CONTINUE)
     assert max(abs(a) for a in angles) < 1.5

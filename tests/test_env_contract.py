@@ -28,7 +28,7 @@ from clnn_ros.core.encoder import Encoder
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.gym_physics import GymCartPole, gym_matched_params
 from clnn_ros.core.params import ParamError, Params, params_from_strings
-from clnn_ros.core.physics import CartPole
+from clnn_ros.core.physics import CartPole, at_rest
 from clnn_ros.graph.names import ENV_CONTRACT_VERSION, RECORDER
 from clnn_ros.graph.run import ENVIRONMENT_GIVEN
 
@@ -116,7 +116,7 @@ def test_checker(checks, name):
 
 def steps_of(cartpole: CartPole, directions) -> list:
     """(state before, direction, state after, tick) of a cart-pole pushed with `directions`."""
-    cartpole.reset(1.0)
+    cartpole.reset(at_rest(1.0))
     steps = []
     for tick, direction in enumerate(directions, 1):
         before = cartpole.state

@@ -18,7 +18,7 @@ from clnn_ros.core.episode import run_episode
 from clnn_ros.core.gym_physics import gym_matched_params
 from clnn_ros.core.mujoco_physics import MujocoCartPole
 from clnn_ros.core.params import Params, params_from_strings
-from clnn_ros.core.physics import CONTINUE, FAIL_ANGLE, FAIL_POSITION, CartPole
+from clnn_ros.core.physics import CONTINUE, FAIL_ANGLE, FAIL_POSITION, CartPole, at_rest
 from clnn_ros.core.presets import preset_values
 
 from conftest import assert_run_equals_episode, free_domain_id, ros_environment
@@ -41,7 +41,7 @@ def ros_env(tmp_path_factory):
 
 def test_a_positive_angle_leans_the_pole_toward_plus_x_and_it_falls_that_way():
     plant = MujocoCartPole()
-    plant.reset(1.0)
+    plant.reset(at_rest(1.0))
     assert plant.state == pytest.approx((0.0, 0.0, 1.0, 0.0))
     mujoco.mj_kinematics(plant.model, plant.data)
     pole_centre = plant.data.xipos[plant.model.body("pole").id]
@@ -58,7 +58,7 @@ def test_plus_force_pushes_the_cart_toward_plus_x_and_turns_the_pole_back(action
                                                                           cart_direction):
     """As in core/physics.py: +F (action 1) pushes toward +x and makes theta_acc negative."""
     plant = MujocoCartPole()
-    plant.reset(0.0)
+    plant.reset(at_rest(0.0))
     assert plant.step(action) == CONTINUE
     x, x_dot, theta_deg, theta_dot_deg = plant.state
     assert np.sign(x) == np.sign(x_dot) == cart_direction
@@ -69,8 +69,8 @@ def test_the_plant_follows_the_core_physics_with_the_same_constants():
     actions = np.random.default_rng(0).integers(0, 2, AGREEMENT_STEPS)
     plant = MujocoCartPole()
     core = CartPole(gym_matched_params(Params()).replace(integrator="semi_implicit"))
-    plant.reset(1.0)
-    core.reset(1.0)
+    plant.reset(at_rest(1.0))
+    core.reset(at_rest(1.0))
     for action in actions:
         assert plant.step(action) == core.step(action)
         np.testing.assert_allclose(plant.state, core.state, rtol=0, atol=AGREEMENT_TOLERANCE)
@@ -78,10 +78,10 @@ def test_the_plant_follows_the_core_physics_with_the_same_constants():
 
 def test_limits_are_checked_after_each_step_the_angle_first():
     plant = MujocoCartPole()
-    plant.reset(11.9)
+    plant.reset(at_rest(11.9))
     assert plant.step(0) == FAIL_ANGLE  # -F tips the pole further toward +theta
     for angle_deg, expected in ((0.0, FAIL_POSITION), (11.9, FAIL_ANGLE)):
-        plant.reset(angle_deg)
+        plant.reset(at_rest(angle_deg))
         plant.data.qpos[0], plant.data.qvel[0] = 2.39, 1.0  # the cart about to leave the track
         assert plant.step(0) == expected
 

@@ -19,7 +19,7 @@ from clnn_ros.batch import run_batch
 from clnn_ros.core.encoder import Encoder
 from clnn_ros.core.gym_physics import GYM_PHYSICS, gym_matched_params
 from clnn_ros.core.params import Params, params_from_strings
-from clnn_ros.core.physics import CartPole
+from clnn_ros.core.physics import CartPole, at_rest
 from clnn_ros.core.presets import PRESETS, Preset, overlay_values, preset_values
 from clnn_ros.core.agent import RLNAgent
 from clnn_ros.reproduce.__main__ import build_parser, learn_params, main
@@ -199,7 +199,7 @@ def test_action_1_pushes_forward_in_gymnasium_and_in_the_core():
             assert np.sign(after[1] - before[1]) == sign
     for action, sign in ((0, -1), (1, +1)):
         cartpole = CartPole(Params())
-        cartpole.reset(0.0)
+        cartpole.reset(at_rest(0.0))
         cartpole.step(action)
         assert np.sign(cartpole.state[1]) == sign
 

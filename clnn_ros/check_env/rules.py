@@ -10,7 +10,8 @@ import math
 from typing import Iterable, Iterator
 
 from ..core.params import INTEGRATORS, PHYSICS, Params
-from ..core.physics import cartpole_step, physics_constants
+from ..core.physics import (in_degrees, physics_constants, physics_step, start_in_units,
+                            state_in_radians)
 from ..graph.fields import (FAILURE_CART_POSITION, FAILURE_NONE, FAILURE_POLE_ANGLE,
                             FAILURE_REASONS, tick_nanoseconds)
 from ..graph.names import ACTION, CLOCK, READY, STATE, TOPIC_TYPES, TRIAL_EVENT
@@ -215,7 +216,11 @@ def physics_summary(run: Params) -> str:
 
 
 def expected_state(before, direction: int, run: Params) -> tuple:
-    return cartpole_step(*before, direction * run.force, physics_constants(run))[:4]
+    """The state after `before` (degrees, as messages carry it) under the run's physics."""
+    radians = state_in_radians(run)
+    start = start_in_units(before, False, radians is not None)
+    return in_degrees(*physics_step(*start, direction * run.force, physics_constants(run),
+                                    radians)[:4], radians)
 
 
 def close(got: float, want: float) -> bool:

@@ -14,6 +14,13 @@ Seed protocol (so that any two implementations can be compared trial by trial):
     weights = w_base + rng.uniform(0, w_range, size=(2, q, n_inputs))
     initial angles = successive grid[rng.permutation(32)], concatenated, cut to `trials`.
 
+Protocol "gymnasium" (CartPole-v1's, as the RL field measures agents): trial k of seed s starts
+where the (k+1)-th reset() of a CartPole-v1 seeded with reset(seed=STARTS_SEED + s) puts it,
+i.e. numpy.random.default_rng(STARTS_SEED + s).uniform(-0.05, 0.05, (trials, 4)) row k (x m,
+x_dot m/s, theta rad, theta_dot rad/s): a stream of its own, apart from the weights'. A trial
+is truncated at 500 successful steps (not a failure, no punishment); its return, as Gymnasium
+counts it, is its steps with the failing one: successful steps + 1 if it failed.
+
 An episode can stop after any trial and resume from a checkpoint (core.checkpoint): it then
 runs the seed's remaining trials, and its results equal those of the uninterrupted episode.
 """
@@ -28,7 +35,7 @@ import numpy as np
 from .checkpoint import Checkpoint, capture, check_resumable, restore
 from .encoder import Encoder
 from .params import Params
-from .physics import CONTINUE, CartPole
+from .physics import CONTINUE, RAD_TO_DEG, CartPole, at_rest
 from .agent import RLNAgent, SuccessCounter
 
 
@@ -50,10 +57,32 @@ def seed_setup(seed: int, p: Params) -> tuple[np.ndarray, np.ndarray]:
     return weights, angles[:p.trials]
 
 
+# The gymnasium protocol's starts of seed s: CartPole-v1's after reset(seed=STARTS_SEED + s).
+STARTS_SEED = 2**32
+RESET_BOUND = 0.05   # CartPole-v1's reset draws every variable uniform in +-this
+
+
+def trial_starts(seed: int, p: Params, angles: np.ndarray | None = None) -> tuple[np.ndarray, bool]:
+    """Every trial's start (x, x_dot, theta, theta_dot), (trials, 4), and whether its angles are
+    in radians: the paper's protocol (or `angles`, deg): at rest at the seed's initial angles;
+    gymnasium's: the successive starts of CartPole-v1's reset() (module docstring)."""
+    if angles is None and p.protocol == "gymnasium":
+        seed_setup(seed, p)  # the seed's check
+        stream = np.random.default_rng(STARTS_SEED + seed)
+        return stream.uniform(-RESET_BOUND, RESET_BOUND, size=(p.trials, 4)), True
+    angles = seed_setup(seed, p)[1] if angles is None else np.asarray(angles, dtype=np.float64)
+    return np.array([at_rest(a) for a in angles], dtype=np.float64).reshape(-1, 4), False
+
+
+def returns(steps: np.ndarray, end_status: np.ndarray) -> np.ndarray:
+    """Each trial's return as Gymnasium counts it: its steps, the failing one included."""
+    return np.asarray(steps) + (np.asarray(end_status) != CONTINUE)
+
+
 @dataclass
 class EpisodeResult:
     seed: int
-    initial_angles: np.ndarray  # (trials,) deg
+    initial_angles: np.ndarray  # (trials,) deg: each trial's first pole angle
     steps: np.ndarray  # (trials,) successful steps
     end_status: np.ndarray  # (trials,) physics status that ended the trial (CONTINUE = reached the cap)
     final_weights: np.ndarray
@@ -61,11 +90,12 @@ class EpisodeResult:
 
 
 def run_trial(agent: RLNAgent, counter: SuccessCounter, env: CartPole, encoder: Encoder,
-              initial_angle_deg: float, p: Params, learn: bool = True,
-              trace: Callable[[tuple], None] | None = None, trial: int = 0) -> tuple[int, int]:
-    """Run trial `trial` of an episode; returns (successful steps, end status). `trace` gets the
-    state after each step."""
-    env.reset(initial_angle_deg)
+              start, p: Params, learn: bool = True,
+              trace: Callable[[tuple], None] | None = None, trial: int = 0,
+              start_in_radians: bool = False) -> tuple[int, int]:
+    """Run trial `trial` of an episode from `start` (trial_starts: x, x_dot, theta, theta_dot);
+    returns (successful steps, end status). `trace` gets the state after each step."""
+    env.reset(start, start_in_radians)
     agent.begin_trial(trial, learn)
     counter.begin_trial()
     steps = 0
@@ -100,20 +130,30 @@ def run_episode(seed: int, p: Params, weights: np.ndarray | None = None, learn: 
                 angles: np.ndarray | None = None,
                 env_factory: Callable[[Params], CartPole] = CartPole,
                 resume: Checkpoint | None = None) -> EpisodeResult:
-    """One episode with the seed protocol; `weights`/`angles` override the seed's own;
-    `env_factory(p)` makes the environment (e.g. core.gym_physics.GymCartPole); `resume`
-    continues a checkpoint with the seed's remaining trials (up to p.trials)."""
+    """One episode with the seed protocol; `weights`/`angles` override the seed's own (`angles`:
+    the paper's starts at these angles, deg); `env_factory(p)` makes the environment (e.g.
+    core.gym_physics.GymCartPole); `resume` continues a checkpoint with the seed's remaining
+    trials (up to p.trials)."""
     agent, counter, first_trial = start_episode(seed, p, weights, resume)
-    angles = seed_setup(seed, p)[1][first_trial:] if angles is None else \
-        np.asarray(angles, dtype=np.float64)
+    starts, in_radians = trial_starts(seed, p, angles)
+    if angles is None:
+        starts = starts[first_trial:]
     env, encoder = env_factory(p), Encoder.from_params(p)
-    steps = np.zeros(len(angles), dtype=np.int64)
-    status = np.zeros(len(angles), dtype=np.int64)
-    for trial, angle in enumerate(angles):
-        steps[trial], status[trial] = run_trial(agent, counter, env, encoder, angle, p, learn,
-                                                trial=first_trial + trial)
-    return EpisodeResult(seed, angles, steps, status, agent.weights.copy(),
-                         capture(agent, counter, seed, first_trial + len(angles)))
+    steps = np.zeros(len(starts), dtype=np.int64)
+    status = np.zeros(len(starts), dtype=np.int64)
+    initial_angles = np.zeros(len(starts), dtype=np.float64)
+    for trial, start in enumerate(starts):
+        steps[trial], status[trial] = run_trial(agent, counter, env, encoder, start, p, learn,
+                                                trial=first_trial + trial,
+                                                start_in_radians=in_radians)
+        initial_angles[trial] = first_angle(start, in_radians)
+    return EpisodeResult(seed, initial_angles, steps, status, agent.weights.copy(),
+                         capture(agent, counter, seed, first_trial + len(starts)))
+
+
+def first_angle(start, in_radians: bool) -> float:
+    """A start's pole angle in degrees (math.degrees' factor)."""
+    return float(start[2]) * RAD_TO_DEG if in_radians else float(start[2])
 
 
 def evaluate_weights(weights: np.ndarray, p: Params) -> EpisodeResult:

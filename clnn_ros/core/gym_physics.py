@@ -6,7 +6,8 @@ Gymnasium's own constants apply (those of GYM_PHYSICS below); the model's Params
 change them. Gymnasium keeps the state in radians (float64); the state seen by the encoder and
 published on /cartpole/state is in degrees: math.degrees(rad).
 
-    env = GymCartPole(); env.reset(0.5); status = env.step(1); x, x_dot, th_deg, thd_deg = env.state
+    env = GymCartPole(); env.reset(at_rest(0.5)); status = env.step(1)
+    x, x_dot, th_deg, thd_deg = env.state
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import math
 
 import numpy as np
 
-from .physics import CONTINUE, FAIL_ANGLE, FAIL_POSITION
+from .physics import CONTINUE, FAIL_ANGLE, FAIL_POSITION, start_in_units
 
 # Gymnasium's CartPole-v1 as Params values (gymnasium/envs/classic_control/cartpole.py: its
 # constants, true equations, explicit Euler, limits 12 deg and 2.4 m).
@@ -25,7 +26,7 @@ GYM_PHYSICS = dict(cart_mass=1.0, pole_mass=0.1, pole_length=0.5, gravity=9.8, f
 
 
 class GymCartPole:
-    """Gymnasium's CartPole-v1 with the core's interface: reset(angle_deg), step(0|1) -> status,
+    """Gymnasium's CartPole-v1 with the core's interface: reset(start), step(0|1) -> status,
     state = (x m, x_dot m/s, theta deg, theta_dot deg/s)."""
 
     def __init__(self, params=None):  # params accepted (and unused) for CartPole's signature
@@ -36,10 +37,10 @@ class GymCartPole:
         self.tau = self.env.tau
         self.state = (0.0, 0.0, 0.0, 0.0)
 
-    def reset(self, initial_angle_deg: float) -> tuple:
-        """Trial start: cart centred and at rest, pole at rest at the angle (set directly)."""
-        self.env.state = np.array((0.0, 0.0, math.radians(initial_angle_deg), 0.0),
-                                  dtype=np.float64)
+    def reset(self, start, start_in_radians: bool = False) -> tuple:
+        """Trial start at (x, x_dot, theta, theta_dot), angles in degrees or radians (set
+        directly: gymnasium's reset() draws a start of its own)."""
+        self.env.state = np.array(start_in_units(start, start_in_radians, True), dtype=np.float64)
         self.env.steps_beyond_terminated = None
         self._read_state()
         return self.state
@@ -63,3 +64,9 @@ def gym_matched_params(p):
     """p with the core's own physics made the same model as gymnasium's CartPole-v1 (used to
     run the batch engine on gymnasium's physics)."""
     return p.replace(**GYM_PHYSICS)
+
+
+def gym_exact_params(p):
+    """p with the core's own physics made gymnasium's CartPole-v1 step itself, bit for bit
+    (physics "gymnasium": its float operations, in radians), with its constants."""
+    return p.replace(**{**GYM_PHYSICS, "physics": "gymnasium"})

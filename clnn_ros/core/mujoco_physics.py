@@ -24,7 +24,7 @@ The state is qpos and qvel, the pole's converted to degrees: (x m, x_dot m/s, th
 theta_dot deg/s). After each step the angle limit (12 deg) is checked first, then the track
 (2.4 m), as in the core. The model's Params do not change the plant.
 
-    env = MujocoCartPole(); env.reset(0.5); status = env.step(1)
+    env = MujocoCartPole(); env.reset(at_rest(0.5)); status = env.step(1)
     x, x_dot, theta_deg, theta_dot_deg = env.state
 """
 
@@ -33,7 +33,7 @@ from __future__ import annotations
 import math
 
 from .gym_physics import GYM_PHYSICS
-from .physics import CONTINUE, FAIL_ANGLE, FAIL_POSITION
+from .physics import CONTINUE, FAIL_ANGLE, FAIL_POSITION, start_in_units
 
 # The pole's inertia about its own axis: irrelevant to a hinge about y, but MuJoCo needs every
 # principal moment positive; a thin rod's is tiny.
@@ -76,7 +76,7 @@ MJCF = cartpole_mjcf(*(GYM_PHYSICS[name] for name in
 
 
 class MujocoCartPole:
-    """MuJoCo's cart-pole with the core's interface: reset(angle_deg), step(0|1) -> status,
+    """MuJoCo's cart-pole with the core's interface: reset(start), step(0|1) -> status,
     state = (x m, x_dot m/s, theta deg, theta_dot deg/s)."""
 
     def __init__(self, params=None):  # params accepted (and unused) for CartPole's signature
@@ -92,10 +92,13 @@ class MujocoCartPole:
         self.pole_length = GYM_PHYSICS["pole_length"]
         self.state = (0.0, 0.0, 0.0, 0.0)
 
-    def reset(self, initial_angle_deg: float) -> tuple:
-        """Trial start: cart centred and at rest, pole at rest at the angle (set directly)."""
+    def reset(self, start, start_in_radians: bool = False) -> tuple:
+        """Trial start at (x, x_dot, theta, theta_dot), angles in degrees or radians (set
+        directly)."""
         self._mujoco.mj_resetData(self.model, self.data)
-        self.data.qpos[:] = (0.0, math.radians(initial_angle_deg))
+        x, x_dot, theta, theta_dot = start_in_units(start, start_in_radians, True)
+        self.data.qpos[:] = (x, theta)
+        self.data.qvel[:] = (x_dot, theta_dot)
         self._read_state()
         return self.state
 

@@ -9,7 +9,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, fields
 
-PHYSICS = ("paper", "correct", "integration_slip")
+PHYSICS = ("paper", "correct", "integration_slip", "gymnasium")
+PROTOCOLS = ("paper", "gymnasium")
+GYMNASIUM_MAX_STEPS = 500  # CartPole-v1 truncates an episode at 500 steps
 INTEGRATORS = ("semi_implicit", "euler")
 TIE_BREAKS = ("exact", "index", "random")
 TAGGING = ("winner", "both_neurons")
@@ -60,6 +62,10 @@ class Params:
     max_steps: int = 10_000  # a trial stops after this many successful steps
     n_angles: int = 32  # initial angles evenly spaced over [-angle_span_deg, +angle_span_deg]
     angle_span_deg: float = 1.5
+    # "paper": the above; "gymnasium": CartPole-v1's own protocol, as the RL field measures
+    # agents: each trial starts where Gymnasium's reset() puts it (all four variables uniform in
+    # +-0.05, SI units and radians; core.episode.trial_starts) and is truncated at 500 steps.
+    protocol: str = "paper"
 
     # Encoder (Table 1): interior interval edges. A tuple, or text "-6,-1,0,1,6" (ROS/YAML).
     angle_edges_deg: tuple = ANGLE_EDGES_DEG  # pole angle, deg: len + 1 inputs (Table 1: 6)
@@ -71,6 +77,7 @@ class Params:
 
     # Environment (section 1.2).
     physics: str = "paper"  # "paper": the units slip that reproduces the figures; "correct": true equations
+    # ("gymnasium": CartPole-v1's step itself, its float operations in its order, in radians)
     integrator: str = "semi_implicit"  # "semi_implicit" (velocities first) or "euler" (explicit)
     cart_mass: float = 0.711
     pole_mass: float = 0.209
@@ -126,6 +133,7 @@ class Params:
     def validate(self) -> None:
         """Raise ParamError with one clear line for the first bad value found."""
         _choice("physics", self.physics, PHYSICS)
+        _choice("protocol", self.protocol, PROTOCOLS)
         _choice("integrator", self.integrator, INTEGRATORS)
         _choice("tie_break", self.tie_break, TIE_BREAKS)
         _choice("tagging", self.tagging, TAGGING)
@@ -149,6 +157,10 @@ class Params:
             # Counts travel in the messages' uint32 fields (trial, successful_steps).
             if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value < 2**31:
                 raise ParamError(f"{name} must be a positive integer below 2**31, got {value!r}")
+        if self.protocol == "gymnasium" and self.max_steps != GYMNASIUM_MAX_STEPS:
+            raise ParamError(f"protocol gymnasium truncates a trial at {GYMNASIUM_MAX_STEPS} steps "
+                             f"(CartPole-v1): max_steps must be {GYMNASIUM_MAX_STEPS}, got "
+                             f"{self.max_steps!r}")
         positive = ("w_max", "cart_mass", "pole_mass", "pole_length", "gravity", "tau",
                     "angle_limit_deg", "track_limit_m", "velocity_edge")
         non_negative = ("rho_plus", "rho_minus", "punish", "w_base", "w_range", "force",
@@ -287,6 +299,7 @@ def params_from_strings(values: dict[str, str], base: Params | None = None) -> P
     return base.replace(**converted)
 
 
-__all__ = ["Params", "ParamError", "params_from_strings", "PHYSICS", "INTEGRATORS", "TIE_BREAKS",
+__all__ = ["Params", "ParamError", "params_from_strings", "PHYSICS", "PROTOCOLS",
+           "GYMNASIUM_MAX_STEPS", "INTEGRATORS", "TIE_BREAKS",
            "TAGGING", "E_FLAGS", "SUCCESS_COUNTER", "DECAY_COUNTERS", "FIRST_ACTION",
            "PUNISH_TIMING", "INFERENCE", "STATE_NAMES", "STATE_VAR_ORDER"]

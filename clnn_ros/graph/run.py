@@ -14,8 +14,9 @@ import yaml
 
 from ..core.gym_physics import GYM_PHYSICS
 from ..core.params import (DECAY_COUNTERS, E_FLAGS, FIRST_ACTION, INFERENCE, INTEGRATORS,
-                           MAX_SEGMENTS, PHYSICS, PUNISH_TIMING, STATE_NAMES, SUCCESS_COUNTER,
-                           TAGGING, TIE_BREAKS, ParamError, Params, params_from_strings)
+                           MAX_SEGMENTS, PHYSICS, PROTOCOLS, PUNISH_TIMING, STATE_NAMES,
+                           SUCCESS_COUNTER, TAGGING, TIE_BREAKS, ParamError, Params,
+                           params_from_strings)
 from ..core.presets import overlay_values, preset_values
 from .names import RECORDER, TRIAL_MANAGER, clock_remappings
 
@@ -105,8 +106,12 @@ DESCRIPTIONS = {
     "position_edges_m": ("encoder: interior edges of the cart-position intervals, m", None),
     "angular_velocity_edges_deg_per_s": ("encoder: interior edges of the pole angular-velocity "
                                          "intervals, deg/s", None),
-    "physics": ("cart-pole equations: paper (its units slip), correct, or integration_slip (the "
-                "slip in the pole's integration only)", PHYSICS),
+    "physics": ("cart-pole equations: paper (its units slip), correct, integration_slip (the "
+                "slip in the pole's integration only), or gymnasium (CartPole-v1's step itself, "
+                "in radians)", PHYSICS),
+    "protocol": ("paper (its 32 start angles, the cart at rest) or gymnasium (CartPole-v1's "
+                 "random starts, truncated at 500 steps: the core and the batch engine only, "
+                 "not yet the ROS graph)", PROTOCOLS),
     "integrator": ("physics integration", INTEGRATORS),
     "cart_mass": ("kg", POSITIVE), "pole_mass": ("kg", POSITIVE),
     "pole_length": ("half the pole's length, m", POSITIVE), "gravity": ("m/s^2", POSITIVE),
@@ -222,6 +227,13 @@ def names_list(setting: str) -> set[str]:
     return {name.strip() for name in setting.split(",") if name.strip()}
 
 
+def check_graph_runs(params: Params) -> None:
+    """A ParamError for what the core runs and the ROS graph does not (yet)."""
+    if params.protocol != "paper":
+        raise ParamError(f"protocol {params.protocol} runs in the core and the batch engine "
+                         f"only, not yet in the ROS graph: protocol must be paper here")
+
+
 def node_parameters(run: dict, node: str, own: dict | None = None) -> tuple[Params, dict]:
     """What `node` takes of a run's values: a validated Params of the model parameters it uses
     (the others at their defaults) and its run settings (and its `own`: {name: default}). A
@@ -233,8 +245,8 @@ def node_parameters(run: dict, node: str, own: dict | None = None) -> tuple[Para
         raise ParamError(f"unknown parameter {unknown[0]!r}; known: {', '.join(sorted(known))}")
     # Every value given is checked as run_all checks it, those the node leaves to others too:
     # a node started by hand with -p trials:=0 says so rather than run.
-    params_from_strings({name: value for name, value in run.items()
-                         if name not in RUN_SETTINGS and name not in own})
+    check_graph_runs(params_from_strings({name: value for name, value in run.items()
+                                          if name not in RUN_SETTINGS and name not in own}))
     for name in set(run) & set(RUN_SETTINGS):
         convert_setting(name, run[name])
     used = NODE_PARAMETERS[node]
@@ -269,6 +281,7 @@ def run_values(defaults: dict, preset: str | None = None, params_file: Path | No
             raise ParamError(f"{name} is set by run_all ({option}), not as a parameter")
     model = {k: v for k, v in values.items() if k not in RUN_SETTINGS}
     params = params_from_strings(model)  # raises ParamError with one line
+    check_graph_runs(params)
     # The nodes get the checked values: rcl refuses e.g. a list mixing ints and floats.
     values.update({k: list(v) if isinstance(v, tuple) else v
                    for k, v in params.to_dict().items() if k in model})

@@ -27,7 +27,7 @@ from rosgraph_msgs.msg import Clock
 from visualization_msgs.msg import MarkerArray
 
 from ..core.params import ParamError, Params
-from ..core.physics import CONTINUE, CartPole
+from ..core.physics import CONTINUE, CartPole, at_rest
 from ..graph.fields import stamp_nanoseconds, tick_nanoseconds, tick_stamp
 from ..graph.lockstep import Refusals
 from ..graph.names import ACTION, CLOCK, MARKERS, STATE, TRIAL_EVENT
@@ -146,7 +146,7 @@ class EnvironmentNode(Node):
         self.pending = {}
         status = CONTINUE
         if start is not None:
-            self.cartpole.reset(start.initial_angle_deg)
+            self.cartpole.reset(at_rest(start.initial_angle_deg))
             self.trial, self.successful_steps = start.trial, 0
         else:
             status = self.cartpole.step(1 if action.force_direction > 0 else 0)

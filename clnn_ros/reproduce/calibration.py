@@ -16,7 +16,8 @@ from ..batch import evaluate_weights_batch, run_batch
 from ..core.episode import angle_grid
 from ..core.optimal import optimal_weights
 from ..core.params import Params
-from ..core.physics import CONTINUE, cartpole_step, physics_constants
+from ..core.physics import (CONTINUE, at_rest, physics_constants, physics_step, start_in_units,
+                            state_in_radians)
 from ..core.agent import RLNAgent
 from .common import (EDGE_SCAN, LITERAL_EDGE, MODES, PAPER, PAPER_MODE, end_reason, mode_label,
                      progress, trace_trial, write_csv)
@@ -75,11 +76,11 @@ class Calibration:
 
 def constant_force_trial(p: Params, force: float, angle_deg: float = 0.0) -> tuple[int, int]:
     """(successful steps, end status) under a constant force (N) from rest at `angle_deg`."""
-    constants = physics_constants(p)
-    x, x_dot, theta, theta_dot = 0.0, 0.0, float(angle_deg), 0.0
+    constants, radians = physics_constants(p), state_in_radians(p)
+    x, x_dot, theta, theta_dot = start_in_units(at_rest(angle_deg), False, radians is not None)
     for steps in range(p.max_steps):
-        x, x_dot, theta, theta_dot, status = cartpole_step(x, x_dot, theta, theta_dot, force,
-                                                           constants)
+        x, x_dot, theta, theta_dot, status = physics_step(x, x_dot, theta, theta_dot, force,
+                                                          constants, radians)
         if status != CONTINUE:
             return steps, status
     return p.max_steps, CONTINUE

@@ -22,7 +22,7 @@ from ..batch import BatchResult, run_batch
 from ..core.encoder import Encoder
 from ..core.episode import run_trial
 from ..core.params import Params
-from ..core.physics import CartPole
+from ..core.physics import CartPole, at_rest
 from ..core.agent import RLNAgent, SuccessCounter
 
 # ------------------------------------------------------------------------------------------------
@@ -125,9 +125,9 @@ def trace_trial(weights: np.ndarray, angle_deg: float, p: Params, learn: bool = 
     steps, status). Row 0 is the initial state, row k the state after step k."""
     agent = RLNAgent(p, weights, seed=seed)
     env = CartPole(p)
-    states = [env.reset(angle_deg)]
-    steps, status = run_trial(agent, SuccessCounter(p), env, Encoder.from_params(p), angle_deg, p,
-                              learn=learn, trace=states.append)
+    states = [env.reset(at_rest(angle_deg))]
+    steps, status = run_trial(agent, SuccessCounter(p), env, Encoder.from_params(p),
+                              at_rest(angle_deg), p, learn=learn, trace=states.append)
     return np.array(states), steps, status
 
 

@@ -1,0 +1,112 @@
+"""CartPole-v1's own protocol (issue 34): the core's "gymnasium" physics is Gymnasium's step bit
+for bit, the protocol's starts are Gymnasium's reset() draws, and an episode on Gymnasium itself
+equals the batch engine's on the core's physics, trial by trial and in the final weights."""
+
+import math
+
+import gymnasium
+import numpy as np
+import pytest
+
+from clnn_ros.batch import run_batch
+from clnn_ros.core.episode import STARTS_SEED, returns, run_episode, trial_starts
+from clnn_ros.core.gym_physics import GymCartPole, gym_exact_params
+from clnn_ros.core.params import GYMNASIUM_MAX_STEPS, ParamError, Params
+from clnn_ros.core.physics import (CONTINUE, FAIL_ANGLE, FAIL_POSITION, CartPole, at_rest,
+                                   physics_constants)
+
+
+def gymnasium_params(**changes) -> Params:
+    return gym_exact_params(Params(protocol="gymnasium", max_steps=GYMNASIUM_MAX_STEPS,
+                                   **changes))
+
+
+@pytest.mark.parametrize("integrator", ["euler", "semi_implicit"])
+def test_the_gymnasium_physics_is_gymnasiums_step_bit_for_bit(integrator):
+    """Trajectories of random actions from Gymnasium's own starts, to the failure: the same
+    state after every step (in radians inside, in degrees as the encoder sees it) and the same
+    failures, on both of Gymnasium's integrators."""
+    p = gymnasium_params().replace(integrator=integrator)
+    env = gymnasium.make("CartPole-v1", max_episode_steps=None).unwrapped
+    if integrator == "semi_implicit":
+        env.kinematics_integrator = "semi-implicit euler"
+    ours = CartPole(p)
+    actions = np.random.default_rng(7)
+    steps = ends = 0
+    for episode in range(40):
+        env.reset(seed=episode)
+        ours.reset(env.state.copy(), start_in_radians=True)
+        while True:
+            action = int(actions.integers(2))
+            status = ours.step(action)
+            _, _, terminated, _, _ = env.step(action)
+            steps += 1
+            x, x_dot, theta, theta_dot = (float(v) for v in env.state)
+            # as the graph's gymnasium node publishes it (GymCartPole)
+            assert ours.state == (x, x_dot, math.degrees(theta), math.degrees(theta_dot))
+            assert ours.state_in_own_units == (x, x_dot, theta, theta_dot)
+            assert (status != CONTINUE) == terminated
+            if terminated:
+                ends += 1
+                assert status == (FAIL_ANGLE if abs(theta) > env.theta_threshold_radians
+                                  else FAIL_POSITION)
+                break
+    assert ends == 40 and steps > 400
+
+
+def test_gymnasium_protocol_starts_are_cartpole_v1_resets():
+    """Trial k of seed s starts where CartPole-v1's (k+1)-th reset puts it after
+    reset(seed=STARTS_SEED + s): the four variables in +-0.05, radians."""
+    p = gymnasium_params(trials=20)
+    env = gymnasium.make("CartPole-v1").unwrapped
+    for seed in (0, 3):
+        env.reset(seed=STARTS_SEED + seed)
+        resets = [env.state.copy()]
+        for _ in range(p.trials - 1):
+            env.reset()
+            resets.append(env.state.copy())
+        starts, in_radians = trial_starts(seed, p)
+        assert in_radians
+        np.testing.assert_array_equal(starts, np.array(resets))
+    assert np.all(np.abs(trial_starts(5, gymnasium_params(trials=512))[0]) <= 0.05)
+
+
+def test_an_episode_on_gymnasium_itself_equals_the_batch_engine():
+    """The core driving Gymnasium's own CartPole-v1 (GymCartPole) under its protocol equals the
+    batch engine on the core's gymnasium physics, trial by trial and in the final weights; the
+    protocol truncates at 500 successful steps, with no punishment."""
+    p = gymnasium_params(trials=40, nsv=2, velocity_edge=0.5, sigma=16)
+    seeds = [2, 7]  # each reaches the truncation once or more
+    batch = run_batch(seeds, p)
+    for k, seed in enumerate(seeds):
+        core = run_episode(seed, p, env_factory=GymCartPole)
+        np.testing.assert_array_equal(batch.steps[k], core.steps, err_msg=f"seed {seed}")
+        np.testing.assert_array_equal(batch.end_status[k], core.end_status)
+        np.testing.assert_array_equal(batch.initial_angles[k], core.initial_angles)
+        np.testing.assert_array_equal(batch.final_weights[k], core.final_weights)
+    assert batch.steps.max() == GYMNASIUM_MAX_STEPS
+    assert set(batch.end_status[batch.steps == GYMNASIUM_MAX_STEPS]) == {CONTINUE}
+    assert len(set(batch.initial_angles[0])) == p.trials  # each trial its own random start
+
+
+def test_the_paper_protocol_on_the_gymnasium_physics_starts_at_rest_in_radians():
+    """The paper's starts (degrees) on a physics that keeps radians: math.radians of the angle."""
+    p = gym_exact_params(Params(trials=8))
+    ours, theirs = CartPole(p), GymCartPole()
+    for angle in (-1.5, 0.3, 1.5):
+        assert ours.reset(at_rest(angle)) == theirs.reset(at_rest(angle))
+    assert physics_constants(p)[-1] == theirs.env.theta_threshold_radians
+
+
+def test_returns_count_the_failing_step():
+    """Gymnasium's return: the steps taken, the failing one included; a truncated trial 500."""
+    np.testing.assert_array_equal(
+        returns(np.array([10, 500, 0]), np.array([FAIL_ANGLE, CONTINUE, FAIL_POSITION])),
+        [11, 500, 1])
+
+
+def test_the_gymnasium_protocol_truncates_at_500():
+    with pytest.raises(ParamError, match="protocol gymnasium truncates a trial at 500 steps"):
+        Params(protocol="gymnasium")
+    with pytest.raises(ParamError, match="protocol must be one of 'paper', 'gymnasium'"):
+        Params(protocol="atari")
