@@ -14,6 +14,7 @@ from clnn_ros.core.gym_physics import GymCartPole, gym_exact_params
 from clnn_ros.core.params import GYMNASIUM_MAX_STEPS, ParamError, Params
 from clnn_ros.core.physics import (CONTINUE, FAIL_ANGLE, FAIL_POSITION, CartPole, at_rest,
                                    physics_constants)
+from clnn_ros.reproduce.solving import solved_episode, solving_summary, steps_to_solve
 
 
 def gymnasium_params(**changes) -> Params:
@@ -110,3 +111,17 @@ def test_the_gymnasium_protocol_truncates_at_500():
         Params(protocol="gymnasium")
     with pytest.raises(ParamError, match="protocol must be one of 'paper', 'gymnasium'"):
         Params(protocol="atari")
+
+
+def test_solving_is_judged_on_the_last_100_training_returns():
+    """Solved at the first episode whose last 100 returns average 475 or more; the steps to
+    solve count every episode up to it."""
+    returns_row = [20] * 50 + [475] * 99 + [474, 476] + [500] * 10
+    assert solved_episode(returns_row[:149]) is None  # 99 of 475: still 50 of 20 in the window
+    # episodes 52-151 (1-based): 474 and 476 make up for each other, 98 x 475
+    assert solved_episode(returns_row) == 151
+    assert steps_to_solve(returns_row) == 50 * 20 + 99 * 475 + 474 + 476
+    assert solved_episode([500] * 99) is None  # fewer than 100 episodes
+    summary = solving_summary([returns_row, [10] * 200, [500] * 100])
+    assert summary["seeds"] == 3 and summary["solved"] == 2
+    assert summary["episodes"][1] == (100 + 151) / 2

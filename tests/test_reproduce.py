@@ -51,6 +51,9 @@ def _read_csv(path: Path) -> tuple[list[str], list[dict]]:
     (["--nsv", "1"], Params(nsv=1, trials=8)),
     (["--nsv", "2", "--velocity-edge", "0.5", "--option", "e_flag=live"],
      Params(nsv=2, trials=8, velocity_edge=0.5, e_flag="live")),
+    # CartPole-v1's protocol: truncated at 500 unless said otherwise
+    (["--nsv", "1", "--protocol", "gymnasium", "--physics", "gymnasium"],
+     Params(nsv=1, trials=8, protocol="gymnasium", physics="gymnasium", max_steps=500)),
 ])
 def test_learn_writes_what_run_batch_computes(tmp_path, capsys, argv, params):
     seeds = [3, 5]
@@ -88,6 +91,8 @@ def test_learn_writes_what_run_batch_computes(tmp_path, capsys, argv, params):
     ["--option", "novalue"],
     ["--seeds", "3-1"],
     ["--velocity-edge", "fast"],
+    ["--protocol", "atari"],
+    ["--protocol", "gymnasium", "--option", "max_steps=1000"],
 ])
 def test_bad_input_is_one_line_exit_2(tmp_path, bad):
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}

@@ -30,7 +30,8 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from ..cli import OneLineArgumentParser
-from ..core.params import STATE_NAMES, ParamError, Params, params_from_strings
+from ..core.params import (GYMNASIUM_MAX_STEPS, PROTOCOLS, STATE_NAMES, ParamError, Params,
+                           params_from_strings)
 from ..core.presets import PRESETS, overlay_values, preset_values
 from .calibration import calibrate, print_calibration, write_calibration
 from .cluster import ClusterError
@@ -58,7 +59,8 @@ PRESET_HELP = ("a named set of parameter values (" + ", ".join(PRESETS) + "; the
 LOCAL_RAY = "local"  # --ray without an address: a Ray instance of this machine's own
 OWN_FLAGS = {"nsv": "--nsv", "state_vars": "--state-vars", "trials": "--trials",
              "velocity_edge": "--velocity-edge",
-             "physics": "--physics"}  # Params fields `learn` sets with a flag, not --option
+             "physics": "--physics", "protocol": "--protocol"}  # Params fields `learn` sets
+# with a flag, not --option
 
 
 def learn_params(args) -> Params:
@@ -78,6 +80,8 @@ def learn_params(args) -> Params:
         given["velocity_edge"] = args.velocity_edge
     if args.physics is not None:
         given["physics"] = args.physics
+    if args.protocol is not None:
+        given["protocol"] = args.protocol
     for item in args.option:
         key, sep, value = item.partition("=")
         key = key.strip()
@@ -86,7 +90,10 @@ def learn_params(args) -> Params:
         if key in OWN_FLAGS:
             raise ValueError(f"set {key} with {OWN_FLAGS[key]}, not --option")
         given[key] = value.strip()
-    return params_from_strings(overlay_values(values, given))
+    values = overlay_values(values, given)
+    if values.get("protocol") == "gymnasium" and "max_steps" not in values:
+        values["max_steps"] = str(GYMNASIUM_MAX_STEPS)  # the protocol's truncation
+    return params_from_strings(values)
 
 
 def add_cluster_flags(parser: argparse.ArgumentParser) -> None:
@@ -257,7 +264,11 @@ def build_parser() -> argparse.ArgumentParser:
     ln.add_argument("--trials", type=int, help=f"trials per episode (default {TRIALS})")
     ln.add_argument("--velocity-edge", type=str, default=None,
                     help=f"velocity edge in m/s (default: Table 1's {LITERAL_EDGE:g})")
-    ln.add_argument("--physics", default=None, help="paper (default) or correct")
+    ln.add_argument("--physics", default=None,
+                    help="paper (default), correct, integration_slip or gymnasium")
+    ln.add_argument("--protocol", choices=PROTOCOLS, default=None,
+                    help="paper (default: 32 start angles, the cart at rest) or gymnasium "
+                         "(CartPole-v1's: random starts, truncated at 500 steps)")
     ln.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                     help="any other Params field, e.g. tie_break=index (repeatable)")
     ln.add_argument("--out", default="out/learn",
@@ -277,7 +288,11 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--preset", metavar="NAME", help=PRESET_HELP)
     sw.add_argument("--trials", type=int, help=f"trials per episode (default {TRIALS})")
     sw.add_argument("--velocity-edge", type=str, default=None, help="velocity edge in m/s")
-    sw.add_argument("--physics", default=None, help="paper (default) or correct")
+    sw.add_argument("--physics", default=None,
+                    help="paper (default), correct, integration_slip or gymnasium")
+    sw.add_argument("--protocol", choices=PROTOCOLS, default=None,
+                    help="paper (default: 32 start angles, the cart at rest) or gymnasium "
+                         "(CartPole-v1's: random starts, truncated at 500 steps)")
     sw.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                     help="any other Params field, fixed for the whole grid")
     sw.add_argument("--out", default="out/sweep",

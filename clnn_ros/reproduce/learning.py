@@ -11,10 +11,12 @@ import numpy as np
 
 from ..batch import BatchResult
 from ..core.params import Params
+from ..core.episode import returns
 from ..core.physics import CONTINUE
 from .calibration import Calibration
 from .common import (LITERAL_EDGE, STUCK_BELOW, TRIALS, end_reason, progress, stuck, units_batch,
                      write_csv)
+from .solving import SOLVED_MEAN, WINDOW, solving_summary
 
 
 @dataclass
@@ -76,7 +78,23 @@ def print_seed_means(run: Run) -> None:
     print(f"{'seed':>6s} {'mean steps':>11s} {'trials at cap':>14s}")
     for seed, mean, capped in zip(r.seeds, means, (r.end_status == CONTINUE).sum(axis=1)):
         print(f"{seed:6d} {mean:11.1f} {capped:14d}")
-    print(f"overall mean {means.mean():.1f}; seeds stuck below {STUCK_BELOW}: {stuck(means)}")
+    if run.params.protocol == "gymnasium":  # judged as the field judges CartPole-v1
+        print(f"overall mean {means.mean():.1f}")
+        print(solving_line(solving_summary(returns(r.steps, r.end_status))))
+    else:
+        print(f"overall mean {means.mean():.1f}; seeds stuck below {STUCK_BELOW}: "
+              f"{stuck(means)}")
+
+
+def solving_line(summary: dict) -> str:
+    """How many seeds solved CartPole-v1 and what it took them, in one line."""
+    line = (f"solved CartPole-v1 (last {WINDOW} returns averaging {SOLVED_MEAN:g} or more): "
+            f"{summary['solved']} of {summary['seeds']} seeds")
+    if summary["solved"]:
+        (e1, e2, e3), (s1, s2, s3) = summary["episodes"], summary["steps"]
+        line += (f"; episodes to solve: median {e2:g} (quartiles {e1:g}-{e3:g}); environment "
+                 f"steps: median {s2:,.0f} (quartiles {s1:,.0f}-{s3:,.0f})")
+    return line
 
 
 def encodings(cal: Calibration) -> list[tuple[str, Params]]:
