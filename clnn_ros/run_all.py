@@ -33,7 +33,7 @@ import yaml
 from . import bag
 from .cli import OneLineArgumentParser
 from .core.checkpoint import Checkpoint, load_checkpoint
-from .core.params import STATE_NAMES, ParamError, Params
+from .core.params import PROTOCOLS, STATE_NAMES, ParamError, Params
 from .core.presets import PRESETS
 from .files import cannot_create
 from .graph.fields import COMPLETED
@@ -63,7 +63,11 @@ def parse_args(argv):
     parser.add_argument("--state-vars", metavar="NAMES",
                         help="the encoded state variables instead, in input order, e.g. "
                              "pole_angle,cart_position (of: " + ", ".join(STATE_NAMES) + ")")
-    parser.add_argument("--physics", help="paper (default) or correct")
+    parser.add_argument("--physics", help="paper (default), correct, integration_slip or "
+                        "gymnasium (CartPole-v1's step itself)")
+    parser.add_argument("--protocol", choices=PROTOCOLS,
+                        help="paper (default: its 32 start angles, the cart at rest) or "
+                             "gymnasium (CartPole-v1's: random starts, truncated at 500 steps)")
     parser.add_argument("--velocity-edge", type=float,
                         help="with cart_velocity encoded: |dx/dt| edge in m/s (Table 1: 5)")
     parser.add_argument("--max-steps", type=int, help="successful steps that end a trial (10000)")
@@ -173,7 +177,7 @@ def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
             options[key.strip()] = value  # not YAML: the text, which the check refuses
     flags = {key: value for key, value in (
         ("seed", args.seed), ("trials", args.trials), ("nsv", args.nsv),
-        ("state_vars", args.state_vars), ("physics", args.physics),
+        ("state_vars", args.state_vars), ("physics", args.physics), ("protocol", args.protocol),
         ("velocity_edge", args.velocity_edge), ("max_steps", args.max_steps),
         ("stall_timeout_s", args.stall_timeout), ("rate_hz", args.rate)) if value is not None}
     if args.quiet:

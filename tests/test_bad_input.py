@@ -54,8 +54,9 @@ RUN_ALL_CASES = [  # (arguments, what the one error line says)
     (["--nsv", "2", "--state-vars", "pole_angle"], "nsv (2) must be the number of state_vars"),
     (["--physics", "quantum"],
      "physics must be one of 'paper', 'correct', 'integration_slip', 'gymnasium', got 'quantum'"),
-    (["--max-steps", "500", "--option", "protocol=gymnasium"],
-     "protocol gymnasium runs in the core and the batch engine only, not yet in the ROS graph"),
+    (["--protocol", "gymnasium", "--max-steps", "1000"],
+     "protocol gymnasium truncates a trial at 500 steps (CartPole-v1): max_steps must be 500, "
+     "got 1000"),
     (["--option", "sigma=-1"], "sigma must be a positive integer below 2**31, got -1"),
     (["--option", "wmax=9"], "unknown parameter 'wmax'; known: angle_edges_deg"),
     (["--option", "sigma"], "--option expects KEY=VALUE, got 'sigma'"),
@@ -149,8 +150,8 @@ NODE_CASES = [  # (node, its arguments after --ros-args, what the one error line
     ("environment", ["-p", "trials:=99999999999999999999"],
      "trials must be a positive integer below 2**31, got 99999999999999999999"),
     ("encoder", ["-p", "seed:=-1"], "seed must be an integer from 0 to 2**32-1, got -1"),
-    ("environment", ["-p", "protocol:=gymnasium", "-p", "max_steps:=500"],
-     "protocol gymnasium runs in the core and the batch engine only, not yet in the ROS graph"),
+    ("environment", ["-p", "protocol:=gymnasium"],
+     "protocol gymnasium truncates a trial at 500 steps (CartPole-v1): max_steps must be 500"),
     # a renamed node: the graph finds its nodes by name (issue 37: a KeyError before)
     ("agent", ["-r", "__node:=brain"], "the agent node was renamed 'brain': the graph finds"),
     ("encoder", ["-r", "__node:=enc2"], "the encoder node was renamed 'enc2'"),

@@ -228,7 +228,8 @@ def test_optimal_1sv_weights_hold_the_pole_near_zero():
     agent = RLNAgent(p, optimal_weights(1))
     env, encoder, counter = CartPole(p), Encoder.from_params(p), SuccessCounter(p)
     angles = []
-    steps, status = run_trial(agent, counter, env, encoder, at_rest(angle_grid(p)[16]), p, learn=False,
+    env.reset(at_rest(angle_grid(p)[16]))
+    steps, status = run_trial(agent, counter, env, encoder, p, learn=False,
                               trace=lambda s: angles.append(s[2]))
     assert (steps, status) == (10_000, CONTINUE)
     assert max(abs(a) for a in angles) < 1.5

@@ -2,7 +2,10 @@
 for bit, the protocol's starts are Gymnasium's reset() draws, and an episode on Gymnasium itself
 equals the batch engine's on the core's physics, trial by trial and in the final weights."""
 
+import csv
 import math
+import subprocess
+import sys
 
 import gymnasium
 import numpy as np
@@ -11,10 +14,20 @@ import pytest
 from clnn_ros.batch import run_batch
 from clnn_ros.core.episode import STARTS_SEED, returns, run_episode, trial_starts
 from clnn_ros.core.gym_physics import GymCartPole, gym_exact_params
-from clnn_ros.core.params import GYMNASIUM_MAX_STEPS, ParamError, Params
+from clnn_ros.core.params import GYMNASIUM_MAX_STEPS, ParamError, Params, params_from_strings
 from clnn_ros.core.physics import (CONTINUE, FAIL_ANGLE, FAIL_POSITION, CartPole, at_rest,
                                    physics_constants)
+from clnn_ros.core.presets import preset_values
 from clnn_ros.reproduce.solving import solved_episode, solving_summary, steps_to_solve
+
+from conftest import free_domain_id, ros_environment
+
+DOMAIN_ID = free_domain_id()
+
+
+@pytest.fixture(scope="module")
+def ros_env(tmp_path_factory):
+    return ros_environment(DOMAIN_ID, tmp_path_factory)
 
 
 def gymnasium_params(**changes) -> Params:
@@ -125,3 +138,28 @@ def test_solving_is_judged_on_the_last_100_training_returns():
     summary = solving_summary([returns_row, [10] * 200, [500] * 100])
     assert summary["seeds"] == 3 and summary["solved"] == 2
     assert summary["episodes"][1] == (100 + 151) / 2
+
+
+@pytest.mark.ros
+# The issue's acceptance run; and seed 28, whose 7th trial is truncated at 500 steps.
+@pytest.mark.parametrize("env, seed, trials", [("gymnasium", 3, 64), ("cartpole", 28, 12)])
+def test_the_graph_under_cartpole_v1s_protocol_equals_the_batch_engine(ros_env, tmp_path, env,
+                                                                        seed, trials):
+    """`clnn-run --env gymnasium --protocol gymnasium --preset cartpole_v1`: the environment node
+    draws each start with Gymnasium's own reset() (or, as the project's cart-pole, from the
+    START's seed), and trials.csv and the final weights equal the batch engine's."""
+    result = subprocess.run([sys.executable, "-m", "clnn_ros.run_all", "--quiet", "--env", env,
+                             "--protocol", "gymnasium", "--preset", "cartpole_v1", "--seed",
+                             str(seed), "--trials", str(trials), "--no-record", "--out",
+                             str(tmp_path)], env=ros_env, capture_output=True, text=True,
+                            timeout=600)
+    assert result.returncode == 0, result.stderr
+    ref = run_batch([seed], params_from_strings({**preset_values("cartpole_v1"),
+                                                 "trials": str(trials)}))
+    with open(tmp_path / "trials.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [int(row["steps"]) for row in rows] == ref.steps[0].tolist()
+    assert [float(row["initial_angle_deg"]) for row in rows] == ref.initial_angles[0].tolist()
+    np.testing.assert_array_equal(np.load(tmp_path / "final_weights.npy"), ref.final_weights[0])
+    if env == "cartpole":
+        assert GYMNASIUM_MAX_STEPS in ref.steps[0]  # the truncation is exercised

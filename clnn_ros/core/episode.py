@@ -68,10 +68,39 @@ def trial_starts(seed: int, p: Params, angles: np.ndarray | None = None) -> tupl
     gymnasium's: the successive starts of CartPole-v1's reset() (module docstring)."""
     if angles is None and p.protocol == "gymnasium":
         seed_setup(seed, p)  # the seed's check
-        stream = np.random.default_rng(STARTS_SEED + seed)
-        return stream.uniform(-RESET_BOUND, RESET_BOUND, size=(p.trials, 4)), True
+        return gymnasium_starts(seed, p.trials), True
     angles = seed_setup(seed, p)[1] if angles is None else np.asarray(angles, dtype=np.float64)
     return np.array([at_rest(a) for a in angles], dtype=np.float64).reshape(-1, 4), False
+
+
+def gymnasium_starts(seed: int, count: int) -> np.ndarray:
+    """The first `count` starts of CartPole-v1's protocol for the seed (radians)."""
+    return np.random.default_rng(STARTS_SEED + seed).uniform(-RESET_BOUND, RESET_BOUND,
+                                                             size=(count, 4))
+
+
+def trial_start(seed: int, p: Params, trial: int, initial_angle_deg: float) -> tuple:
+    """(start, whether in radians) of the seed's trial `trial`, as an environment node takes it
+    from the trial's START: the paper's, at rest at its angle; gymnasium's, drawn from its
+    seed."""
+    if p.protocol == "paper":
+        return at_rest(initial_angle_deg), False
+    return gymnasium_starts(seed, trial + 1)[trial], True
+
+
+def initial_angles(seed: int, p: Params) -> np.ndarray:
+    """Each trial's first pole angle (deg) under the seed's protocol."""
+    starts, in_radians = trial_starts(seed, p)
+    return np.array([first_angle(start, in_radians) for start in starts])
+
+
+def reset_for_trial(env, seed: int, trial: int, start, start_in_radians: bool) -> tuple:
+    """Put `env` at the start of the seed's trial `trial` (trial_starts); CartPole-v1's
+    protocol's start is drawn by Gymnasium's own reset() where env is Gymnasium's
+    (env.reset_as_gymnasium: the same numbers). Returns the state (deg)."""
+    if start_in_radians and hasattr(env, "reset_as_gymnasium"):
+        return env.reset_as_gymnasium(STARTS_SEED + seed, trial)
+    return env.reset(start, start_in_radians)
 
 
 def returns(steps: np.ndarray, end_status: np.ndarray) -> np.ndarray:
@@ -90,12 +119,10 @@ class EpisodeResult:
 
 
 def run_trial(agent: RLNAgent, counter: SuccessCounter, env: CartPole, encoder: Encoder,
-              start, p: Params, learn: bool = True,
-              trace: Callable[[tuple], None] | None = None, trial: int = 0,
-              start_in_radians: bool = False) -> tuple[int, int]:
-    """Run trial `trial` of an episode from `start` (trial_starts: x, x_dot, theta, theta_dot);
-    returns (successful steps, end status). `trace` gets the state after each step."""
-    env.reset(start, start_in_radians)
+              p: Params, learn: bool = True, trace: Callable[[tuple], None] | None = None,
+              trial: int = 0) -> tuple[int, int]:
+    """Run trial `trial` of an episode from the state env was reset to; returns (successful
+    steps, end status). `trace` gets the state after each step."""
     agent.begin_trial(trial, learn)
     counter.begin_trial()
     steps = 0
@@ -143,9 +170,9 @@ def run_episode(seed: int, p: Params, weights: np.ndarray | None = None, learn: 
     status = np.zeros(len(starts), dtype=np.int64)
     initial_angles = np.zeros(len(starts), dtype=np.float64)
     for trial, start in enumerate(starts):
-        steps[trial], status[trial] = run_trial(agent, counter, env, encoder, start, p, learn,
-                                                trial=first_trial + trial,
-                                                start_in_radians=in_radians)
+        reset_for_trial(env, seed, first_trial + trial, start, in_radians)
+        steps[trial], status[trial] = run_trial(agent, counter, env, encoder, p, learn,
+                                                trial=first_trial + trial)
         initial_angles[trial] = first_angle(start, in_radians)
     return EpisodeResult(seed, initial_angles, steps, status, agent.weights.copy(),
                          capture(agent, counter, seed, first_trial + len(starts)))

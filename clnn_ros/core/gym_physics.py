@@ -36,12 +36,27 @@ class GymCartPole:
         self.env = gymnasium.make("CartPole-v1").unwrapped
         self.tau = self.env.tau
         self.state = (0.0, 0.0, 0.0, 0.0)
+        self._next_draw = None  # (reset seed, trial) whose start the next reset() draws
 
     def reset(self, start, start_in_radians: bool = False) -> tuple:
         """Trial start at (x, x_dot, theta, theta_dot), angles in degrees or radians (set
         directly: gymnasium's reset() draws a start of its own)."""
         self.env.state = np.array(start_in_units(start, start_in_radians, True), dtype=np.float64)
         self.env.steps_beyond_terminated = None
+        self._read_state()
+        return self.state
+
+    def reset_as_gymnasium(self, reset_seed: int, trial: int) -> tuple:
+        """Trial `trial`'s start under CartPole-v1's protocol, drawn by gymnasium's own reset():
+        reset(seed=reset_seed) for trial 0, one reset() more for each later trial (a resumed
+        episode replays the draws of the trials before it)."""
+        if (reset_seed, trial) == self._next_draw:
+            self.env.reset()
+        else:  # a new stream, or a resumed episode
+            self.env.reset(seed=reset_seed)
+            for _ in range(trial):
+                self.env.reset()
+        self._next_draw = (reset_seed, trial + 1)
         self._read_state()
         return self.state
 

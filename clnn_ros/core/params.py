@@ -271,6 +271,14 @@ def resolve_state_vars(value, nsv) -> tuple[str, ...]:
     return names
 
 
+def protocol_defaults(values: dict) -> dict:
+    """values (by name, as text or typed) with what their protocol implies where they leave it
+    open: CartPole-v1's truncation at 500 steps under protocol gymnasium."""
+    if values.get("protocol") == "gymnasium" and "max_steps" not in values:
+        return {**values, "max_steps": GYMNASIUM_MAX_STEPS}
+    return values
+
+
 def params_from_strings(values: dict[str, str], base: Params | None = None) -> Params:
     """Params from text values (command line, ROS parameters, YAML), each converted to the
     type of its field; a value that does not convert is one clear ParamError line."""
@@ -299,7 +307,7 @@ def params_from_strings(values: dict[str, str], base: Params | None = None) -> P
     return base.replace(**converted)
 
 
-__all__ = ["Params", "ParamError", "params_from_strings", "PHYSICS", "PROTOCOLS",
+__all__ = ["Params", "ParamError", "params_from_strings", "protocol_defaults", "PHYSICS", "PROTOCOLS",
            "GYMNASIUM_MAX_STEPS", "INTEGRATORS", "TIE_BREAKS",
            "TAGGING", "E_FLAGS", "SUCCESS_COUNTER", "DECAY_COUNTERS", "FIRST_ACTION",
            "PUNISH_TIMING", "INFERENCE", "STATE_NAMES", "STATE_VAR_ORDER"]

@@ -41,7 +41,7 @@ SAVE_CHECKPOINT = "~/save_checkpoint"
 
 # The version of the environment-node contract (docs/ENV_CONTRACT.md, "Versions"): what an
 # environment node written against it publishes and reads. The checker prints it.
-ENV_CONTRACT_VERSION = 2
+ENV_CONTRACT_VERSION = 3
 # The nodes the trial manager waits for before the first tick, and the recorder's name.
 GRAPH_NODES = ("environment", "encoder", "reward", "agent")
 # The graph nodes that run on the graph's sim time (use_sim_time, whose TimeSource subscribes

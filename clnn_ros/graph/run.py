@@ -16,7 +16,7 @@ from ..core.gym_physics import GYM_PHYSICS
 from ..core.params import (DECAY_COUNTERS, E_FLAGS, FIRST_ACTION, INFERENCE, INTEGRATORS,
                            MAX_SEGMENTS, PHYSICS, PROTOCOLS, PUNISH_TIMING, STATE_NAMES,
                            SUCCESS_COUNTER, TAGGING, TIE_BREAKS, ParamError, Params,
-                           params_from_strings)
+                           params_from_strings, protocol_defaults)
 from ..core.presets import overlay_values, preset_values
 from .names import RECORDER, TRIAL_MANAGER, clock_remappings
 
@@ -59,12 +59,12 @@ RESUME = ("seed", "init_weights", "trials")
 NODE_PARAMETERS = {
     # segments: an action's winner must exist in the network (graph.content.action_problem)
     "environment": (*COMMON, *PHYSICS_PARAMETERS, "max_steps", "marker_period_ticks",
-                    "simulator", "segments"),
+                    "simulator", "segments", "protocol"),
     "encoder": (*COMMON, *ENCODING, *STATE_RULE),
     "reward": (*COMMON, *STATE_RULE, "sigma", "success_counter", *RESUME),
     "agent": (*COMMON, *NETWORK, *LEARNING, "force", *RESUME, "out_dir"),
     TRIAL_MANAGER: (*COMMON, *NETWORK, *STATE_RULE, *RESUME, "force", "w_max", "n_angles",
-                    "angle_span_deg", "stall_timeout_s", "out_dir", "progress",
+                    "angle_span_deg", "protocol", "stall_timeout_s", "out_dir", "progress",
                     "external_nodes", "allow_foreign_publishers", "rate_hz"),
 }
 # What the run's params file always holds, at its effective value, for an environment node of
@@ -72,7 +72,7 @@ NODE_PARAMETERS = {
 # holds them equal). Not extra_nodes (the run sets it), nor simulator (the project's node's own
 # setting: an --env-node command's -p simulator:=... must not be overridden).
 ENVIRONMENT_GIVEN = ("tau", *PHYSICS_PARAMETERS, "max_steps", "marker_period_ticks",
-                     "segments")
+                     "segments", "protocol")
 # The recorder keeps every value of the run in its bag.
 NODE_PARAMETERS[RECORDER] = tuple(sorted({*Params().to_dict(), *RUN_SETTINGS}))
 
@@ -110,8 +110,8 @@ DESCRIPTIONS = {
                 "slip in the pole's integration only), or gymnasium (CartPole-v1's step itself, "
                 "in radians)", PHYSICS),
     "protocol": ("paper (its 32 start angles, the cart at rest) or gymnasium (CartPole-v1's "
-                 "random starts, truncated at 500 steps: the core and the batch engine only, "
-                 "not yet the ROS graph)", PROTOCOLS),
+                 "random starts, drawn by the environment from the START's seed; truncated at "
+                 "500 steps)", PROTOCOLS),
     "integrator": ("physics integration", INTEGRATORS),
     "cart_mass": ("kg", POSITIVE), "pole_mass": ("kg", POSITIVE),
     "pole_length": ("half the pole's length, m", POSITIVE), "gravity": ("m/s^2", POSITIVE),
@@ -227,13 +227,6 @@ def names_list(setting: str) -> set[str]:
     return {name.strip() for name in setting.split(",") if name.strip()}
 
 
-def check_graph_runs(params: Params) -> None:
-    """A ParamError for what the core runs and the ROS graph does not (yet)."""
-    if params.protocol != "paper":
-        raise ParamError(f"protocol {params.protocol} runs in the core and the batch engine "
-                         f"only, not yet in the ROS graph: protocol must be paper here")
-
-
 def node_parameters(run: dict, node: str, own: dict | None = None) -> tuple[Params, dict]:
     """What `node` takes of a run's values: a validated Params of the model parameters it uses
     (the others at their defaults) and its run settings (and its `own`: {name: default}). A
@@ -245,8 +238,8 @@ def node_parameters(run: dict, node: str, own: dict | None = None) -> tuple[Para
         raise ParamError(f"unknown parameter {unknown[0]!r}; known: {', '.join(sorted(known))}")
     # Every value given is checked as run_all checks it, those the node leaves to others too:
     # a node started by hand with -p trials:=0 says so rather than run.
-    check_graph_runs(params_from_strings({name: value for name, value in run.items()
-                                          if name not in RUN_SETTINGS and name not in own}))
+    params_from_strings({name: value for name, value in run.items()
+                         if name not in RUN_SETTINGS and name not in own})
     for name in set(run) & set(RUN_SETTINGS):
         convert_setting(name, run[name])
     used = NODE_PARAMETERS[node]
@@ -276,12 +269,12 @@ def run_values(defaults: dict, preset: str | None = None, params_file: Path | No
                   read_params_file(params_file) if params_file is not None else {},
                   options or {}, flags or {}):
         values = overlay_values(values, layer)
+    values = protocol_defaults(values)
     for name, option in SET_BY_THE_RUN.items():
         if name in values:
             raise ParamError(f"{name} is set by run_all ({option}), not as a parameter")
     model = {k: v for k, v in values.items() if k not in RUN_SETTINGS}
     params = params_from_strings(model)  # raises ParamError with one line
-    check_graph_runs(params)
     # The nodes get the checked values: rcl refuses e.g. a list mixing ints and floats.
     values.update({k: list(v) if isinstance(v, tuple) else v
                    for k, v in params.to_dict().items() if k in model})

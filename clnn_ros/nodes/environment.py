@@ -26,8 +26,9 @@ from rclpy.task import Future
 from rosgraph_msgs.msg import Clock
 from visualization_msgs.msg import MarkerArray
 
+from ..core.episode import reset_for_trial, trial_start
 from ..core.params import ParamError, Params
-from ..core.physics import CONTINUE, CartPole, at_rest
+from ..core.physics import CONTINUE, CartPole
 from ..graph.fields import stamp_nanoseconds, tick_nanoseconds, tick_stamp
 from ..graph.lockstep import Refusals
 from ..graph.names import ACTION, CLOCK, MARKERS, STATE, TRIAL_EVENT
@@ -146,7 +147,9 @@ class EnvironmentNode(Node):
         self.pending = {}
         status = CONTINUE
         if start is not None:
-            self.cartpole.reset(at_rest(start.initial_angle_deg))
+            reset_for_trial(self.cartpole, start.seed, start.trial,
+                            *trial_start(start.seed, self.params, start.trial,
+                                         start.initial_angle_deg))
             self.trial, self.successful_steps = start.trial, 0
         else:
             status = self.cartpole.step(1 if action.force_direction > 0 else 0)

@@ -40,7 +40,7 @@ from rclpy.node import Node
 from rclpy.task import Future
 from std_msgs.msg import String, UInt64
 
-from ..core.episode import seed_setup
+from ..core.episode import initial_angles
 from ..files import describe_write_error, write_atomically, write_text_atomically
 from ..graph.fields import (COMPLETED, END_REASONS, summary_json, tick_nanoseconds, tick_stamp,
                             trials_csv)
@@ -72,7 +72,7 @@ class TrialManagerNode(Node):
         self.extra_nodes = names_list(self.settings["extra_nodes"])
         self.finished, self.failure = Future(), None
         self.refusals = Refusals(self.get_logger().error)
-        _, self.angles = seed_setup(self.settings["seed"], self.params)
+        self.angles = initial_angles(self.settings["seed"], self.params)
         self.results = []  # (trial, initial angle, steps, end reason)
         self.clock_msg = Clock()
         self.final_weights = None

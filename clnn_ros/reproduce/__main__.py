@@ -30,8 +30,8 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from ..cli import OneLineArgumentParser
-from ..core.params import (GYMNASIUM_MAX_STEPS, PROTOCOLS, STATE_NAMES, ParamError, Params,
-                           params_from_strings)
+from ..core.params import (PROTOCOLS, STATE_NAMES, ParamError, Params, params_from_strings,
+                           protocol_defaults)
 from ..core.presets import PRESETS, overlay_values, preset_values
 from .calibration import calibrate, print_calibration, write_calibration
 from .cluster import ClusterError
@@ -90,10 +90,7 @@ def learn_params(args) -> Params:
         if key in OWN_FLAGS:
             raise ValueError(f"set {key} with {OWN_FLAGS[key]}, not --option")
         given[key] = value.strip()
-    values = overlay_values(values, given)
-    if values.get("protocol") == "gymnasium" and "max_steps" not in values:
-        values["max_steps"] = str(GYMNASIUM_MAX_STEPS)  # the protocol's truncation
-    return params_from_strings(values)
+    return params_from_strings(protocol_defaults(overlay_values(values, given)))
 
 
 def add_cluster_flags(parser: argparse.ArgumentParser) -> None:

@@ -126,8 +126,8 @@ def trace_trial(weights: np.ndarray, angle_deg: float, p: Params, learn: bool = 
     agent = RLNAgent(p, weights, seed=seed)
     env = CartPole(p)
     states = [env.reset(at_rest(angle_deg))]
-    steps, status = run_trial(agent, SuccessCounter(p), env, Encoder.from_params(p),
-                              at_rest(angle_deg), p, learn=learn, trace=states.append)
+    steps, status = run_trial(agent, SuccessCounter(p), env, Encoder.from_params(p), p,
+                              learn=learn, trace=states.append)
     return np.array(states), steps, status
 
 
