@@ -38,6 +38,8 @@ ARGUMENTS = {
                      "waited for)",
     "rate": "at most this many ticks per second of wall time (50: real time; default 0: as "
             "fast as the graph goes)",
+    "protocol": "paper (default: its 32 start angles) or gymnasium (CartPole-v1's random "
+                "starts, truncated at 500 steps)",
     "params_file": "a ROS 2 parameters YAML (/**: ros__parameters: ...)",
     "namespace": "put every node and topic under /NAME/",
     "env": f"environment node: {', '.join(ENVIRONMENTS)} (default cartpole)",
@@ -46,7 +48,8 @@ ARGUMENTS = {
            "bags/run_<UTC time>)",
 }
 RUN_VALUES = {"seed": "seed", "trials": "trials", "nsv": "nsv", "state_vars": "state_vars",
-              "stall_timeout": "stall_timeout_s", "rate": "rate_hz"}  # launch argument: run value
+              "stall_timeout": "stall_timeout_s", "rate": "rate_hz",
+              "protocol": "protocol"}  # launch argument: run value
 RECORD = "record"  # launch argument: true (default) or false, as run_all's --no-record
 
 
