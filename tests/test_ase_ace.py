@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from clnn_ros.baselines import ase_ace
-from clnn_ros.baselines.ase_ace import N_BOXES, AseAce, AseAceParams, boxes, solved_at, train
+from clnn_ros.baselines.ase_ace import N_BOXES, AseAce, AseAceParams, boxes, train
+from clnn_ros.core.solving import solved_episode
 
 BINS_PER_VARIABLE = (3, 3, 6, 3)  # x, x_dot, theta, theta_dot
 
@@ -97,18 +98,6 @@ def test_train_passes_truncation_as_no_failure(monkeypatch):
     assert calls == ([(False, False, False)] * 4 + [(False, False, True)]) * 3
 
 
-@pytest.mark.parametrize("returns, expected", [
-    ([475] * 100, 100),
-    ([500] * 99, None),
-    ([475] * 99 + [474], None),
-    ([0] * 50 + [500] * 150, 145),
-    ([500] * 90 + [0] * 10 + [500] * 100, 195),  # the dip holds every window under 475 till 195
-    ([500] * 100 + [0] * 100, 100),
-])
-def test_solved_at_is_the_first_full_window_at_475(returns, expected):
-    assert solved_at(returns) == expected
-
-
 def test_training_is_deterministic_for_a_seed():
     first = train(3, 30)
     assert np.array_equal(first, train(3, 30))
@@ -118,8 +107,8 @@ def test_training_is_deterministic_for_a_seed():
 
 def test_training_stops_at_the_solving_episode():
     returns = train(5, 1000)
-    assert solved_at(returns) == len(returns)
-    assert solved_at(returns[:-1]) is None
+    assert solved_episode(returns) == len(returns)
+    assert solved_episode(returns[:-1]) is None
 
 
 def test_learning_raises_the_return():

@@ -18,7 +18,7 @@ from clnn_ros.core.params import GYMNASIUM_MAX_STEPS, ParamError, Params, params
 from clnn_ros.core.physics import (CONTINUE, FAIL_ANGLE, FAIL_POSITION, CartPole, at_rest,
                                    physics_constants)
 from clnn_ros.core.presets import preset_values
-from clnn_ros.reproduce.solving import solved_episode, solving_summary, steps_to_solve
+from clnn_ros.core.solving import solved_episode, solving_summary, steps_to_solve
 
 from conftest import free_domain_id, ros_environment
 
@@ -124,6 +124,18 @@ def test_the_gymnasium_protocol_truncates_at_500():
         Params(protocol="gymnasium")
     with pytest.raises(ParamError, match="protocol must be one of 'paper', 'gymnasium'"):
         Params(protocol="atari")
+
+
+@pytest.mark.parametrize("returns, expected", [
+    ([475] * 100, 100),
+    ([500] * 99, None),
+    ([475] * 99 + [474], None),
+    ([0] * 50 + [500] * 150, 145),
+    ([500] * 90 + [0] * 10 + [500] * 100, 195),  # the dip holds every window under 475 till 195
+    ([500] * 100 + [0] * 100, 100),
+])
+def test_solved_is_the_first_full_window_at_475(returns, expected):
+    assert solved_episode(returns) == expected
 
 
 def test_solving_is_judged_on_the_last_100_training_returns():

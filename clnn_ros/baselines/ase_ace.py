@@ -18,6 +18,8 @@ from typing import Callable
 import gymnasium
 import numpy as np
 
+from ..core.solving import solved_episode
+
 # The paper's thresholds inside the failure limits: 3 x 3 x 6 x 3 = 162 boxes.
 X_EDGES_M = (-0.8, 0.8)
 X_DOT_EDGES_M_PER_S = (-0.5, 0.5)
@@ -29,8 +31,6 @@ N_BOXES = 162
 X_LIMIT_M = float(np.float32(2.4))
 THETA_LIMIT_RAD = float(np.float32(12 * 2 * math.pi / 360))
 
-SOLVED_WINDOW = 100  # CartPole-v1's criterion: the mean of the last 100 returns ...
-SOLVED_MEAN_RETURN = 475.0  # ... reaches its reward threshold
 
 
 def boxes(observation) -> int | None:
@@ -128,23 +128,10 @@ class AseAce:
         self._internal_reinforcement = 0.0
 
 
-def solved_at(returns) -> int | None:
-    """The 1-based number of the first episode whose last SOLVED_WINDOW returns (a full window)
-    average at least SOLVED_MEAN_RETURN; None if none does."""
-    returns = np.asarray(returns, dtype=float)
-    if returns.size < SOLVED_WINDOW:
-        return None
-    cumulative = np.concatenate(([0.0], np.cumsum(returns)))
-    window_sums = cumulative[SOLVED_WINDOW:] - cumulative[:-SOLVED_WINDOW]
-    # Compare sums, not means: exact for integer returns.
-    solved = np.flatnonzero(window_sums >= SOLVED_MEAN_RETURN * SOLVED_WINDOW)
-    return int(solved[0]) + SOLVED_WINDOW if solved.size else None
-
-
 def train(seed: int, max_episodes: int,
           env_factory: Callable[[], gymnasium.Env] | None = None) -> np.ndarray:
     """The returns (steps, the failing one included) of up to max_episodes episodes of one
-    ASE/ACE, stopping once solved_at() is reached. Deterministic for a seed.
+    ASE/ACE, stopping once it has solved CartPole-v1 (core.solving). Deterministic for a seed.
 
     Seeding as CleanRL and Stable-Baselines3 do it: the first reset is env.reset(seed=seed), the
     later ones env.reset() continue the env's own stream. The agent's noise comes from a spawned
@@ -166,7 +153,7 @@ def train(seed: int, max_episodes: int,
                 box = None if terminated else boxes(observation)
                 agent.learn(box, failed=terminated, truncated=truncated)
             returns.append(steps)
-            if solved_at(returns) is not None:
+            if solved_episode(returns) is not None:
                 break
     finally:
         env.close()

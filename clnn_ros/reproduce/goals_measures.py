@@ -9,9 +9,10 @@ import numpy as np
 
 from ..core.optimal import optimal_weights
 from ..core.params import Params
-from ..core.physics import CONTINUE
+from ..core.episode import returns
+from ..core.solving import solved_episode
 from .common import stuck
-from .goals_settings import CONVERGED, GYM_SOLVED, GYM_TRUNCATION, GYM_WINDOW, LAST_TRIALS
+from .goals_settings import CONVERGED, GYM_SOLVED, GYM_TRUNCATION, LAST_TRIALS
 from .gym_eval import FrozenPolicy
 
 
@@ -44,17 +45,12 @@ class Outcome:
     def gym_returns(self) -> np.ndarray:
         """Each trial as CartPole-v1 would count it: a step's reward 1, the failing step's too,
         truncated at 500."""
-        return np.minimum(self.steps + (self.end_status != CONTINUE), GYM_TRUNCATION)
+        return np.minimum(returns(self.steps, self.end_status), GYM_TRUNCATION)
 
     def solved_at(self) -> np.ndarray:
         """Per seed, the trial (1-based) at which the running mean of the last 100 returns first
-        reaches 475; 0 where it never does."""
-        returns = np.cumsum(self.gym_returns(), axis=1)
-        window = returns[:, GYM_WINDOW - 1:] - np.pad(returns, ((0, 0), (1, 0)))[:, :-GYM_WINDOW]
-        reached = window >= GYM_SOLVED * GYM_WINDOW
-        if reached.shape[1] == 0:  # fewer trials than the window: never solved
-            return np.zeros(len(self.steps), dtype=np.int64)
-        return np.where(reached.any(axis=1), reached.argmax(axis=1) + GYM_WINDOW, 0)
+        reaches 475 (core.solving); 0 where it never does."""
+        return np.array([solved_episode(row) or 0 for row in self.gym_returns()], dtype=np.int64)
 
     def rolling_converged(self, threshold: float) -> np.ndarray:
         """Per trial, the share of seeds whose last 64 trials average at least `threshold`."""

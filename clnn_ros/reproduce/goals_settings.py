@@ -7,14 +7,15 @@ from __future__ import annotations
 import itertools
 
 from ..core.gym_physics import gym_matched_params
-from ..core.params import Params, params_from_strings
+from ..core.params import GYMNASIUM_MAX_STEPS, Params, params_from_strings
 from ..core.presets import preset_values
+from ..core.solving import SOLVED_MEAN, WINDOW
 
 REPORT_SEEDS = "0-127"
 SELECT_SEEDS = "128-191"  # every choice below (presets, the grid's best) was made on these
 LAST_TRIALS = 64  # "converged": the mean of a seed's last 64 trials ...
 CONVERGED = 9000  # ... is at least this (of the 10,000-step cap)
-GYM_TRUNCATION, GYM_SOLVED, GYM_WINDOW = 500, 475, 100  # CartPole-v1's "solved"
+GYM_TRUNCATION, GYM_SOLVED, GYM_WINDOW = GYMNASIUM_MAX_STEPS, SOLVED_MEAN, WINDOW  # "solved"
 PLAY_EPISODES = 100  # frozen-weights episodes in gymnasium.make("CartPole-v1"), per seed
 NEAR_OPTIMUM = 0.99  # paper 1 SV: a mean of at least this share of the Figure 7 optimum
 # The learning curves' paper 1-SV line: a 64-trial mean of at least this share of the optimum.

@@ -13,10 +13,10 @@ from ..batch import BatchResult
 from ..core.params import Params
 from ..core.episode import returns
 from ..core.physics import CONTINUE
+from ..core.solving import SOLVED_MEAN, WINDOW, solving_summary
 from .calibration import Calibration
 from .common import (LITERAL_EDGE, STUCK_BELOW, TRIALS, end_reason, progress, stuck, units_batch,
                      write_csv)
-from .solving import SOLVED_MEAN, WINDOW, solving_summary
 
 
 @dataclass
