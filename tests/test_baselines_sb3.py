@@ -1,0 +1,24 @@
+"""The field's deep-RL agents (clnn_ros.baselines.sb3_agents) take rl-zoo3's own CartPole-v1
+hyperparameters as rl-zoo3 does. Needs the baselines extra: skipped without it (the README's
+two commands do not install it)."""
+
+import pytest
+
+pytest.importorskip("rl_zoo3")
+pytest.importorskip("stable_baselines3")
+
+from clnn_ros.baselines.sb3_agents import model_arguments, zoo_entry  # noqa: E402
+
+
+def test_ppo_takes_the_zoos_entry_with_its_schedules():
+    arguments, n_envs, n_timesteps = model_arguments(zoo_entry("ppo")[0])
+    assert (n_envs, n_timesteps) == (8, 100_000)
+    assert arguments["n_steps"] == 32 and arguments["policy"] == "MlpPolicy"
+    assert arguments["learning_rate"](1.0) == pytest.approx(0.001)  # lin_0.001 at the start
+    assert arguments["learning_rate"](0.0) == 0.0  # ... and at the end
+
+
+def test_dqn_takes_the_zoos_network():
+    arguments, n_envs, n_timesteps = model_arguments(zoo_entry("dqn")[0])
+    assert (n_envs, n_timesteps) == (1, 50_000)
+    assert arguments["policy_kwargs"] == {"net_arch": [256, 256]}
