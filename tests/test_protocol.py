@@ -19,6 +19,7 @@ from clnn_ros.core.physics import (CONTINUE, FAIL_ANGLE, FAIL_POSITION, CartPole
                                    physics_constants)
 from clnn_ros.core.presets import preset_values
 from clnn_ros.core.solving import solved_episode, solving_summary, steps_to_solve
+from clnn_ros.reproduce.__main__ import main as reproduce_main
 
 from conftest import free_domain_id, ros_environment
 
@@ -175,3 +176,34 @@ def test_the_graph_under_cartpole_v1s_protocol_equals_the_batch_engine(ros_env, 
     np.testing.assert_array_equal(np.load(tmp_path / "final_weights.npy"), ref.final_weights[0])
     if env == "cartpole":
         assert GYMNASIUM_MAX_STEPS in ref.steps[0]  # the truncation is exercised
+
+
+def test_versus_runs_the_agents_alike_and_resumes(tmp_path, capsys):
+    """clnn-reproduce versus: a row per agent from its stored agent-seeds; run again, nothing is
+    run anew (the stored files stay as they were)."""
+    argv = ["versus", "--seeds", "0-1", "--agents", "rln,ase_ace", "--out", str(tmp_path),
+            "--workers", "1"]
+    assert reproduce_main(argv) == 0
+    report = (tmp_path / "VERSUS.md").read_text()
+    assert "| RLN agent, preset cartpole_v1 (the batch engine) | 2 of 2 |" in report
+    assert "| ASE/ACE on the 162 boxes (Barto, Sutton & Anderson 1983) |" in report
+    assert (tmp_path / "figures" / "versus_returns.png").stat().st_size > 0
+    rows = list(csv.DictReader(open(tmp_path / "data" / "versus_seeds.csv")))
+    assert [(r["agent"], r["seed"]) for r in rows] == \
+        [("rln", "0"), ("rln", "1"), ("ase_ace", "0"), ("ase_ace", "1")]
+    stored = {p: p.stat().st_mtime_ns for p in (tmp_path / "data" / "versus").rglob("*.npz")}
+    assert len(stored) == 4
+    assert reproduce_main(argv) == 0
+    assert {p: p.stat().st_mtime_ns for p in stored} == stored
+    table = [line for line in report.splitlines() if line.startswith("| ")]
+    assert [line for line in (tmp_path / "VERSUS.md").read_text().splitlines()
+            if line.startswith("| ")] == table
+
+
+@pytest.mark.parametrize("agents, message", [
+    ("rln,a2c", "unknown agent 'a2c'; known: rln, rln_mujoco, ase_ace, ppo, dqn"),
+])
+def test_versus_refuses_an_unknown_agent_in_one_line(tmp_path, capsys, agents, message):
+    assert reproduce_main(["versus", "--agents", agents, "--out", str(tmp_path)]) == 2
+    assert message in capsys.readouterr().err.strip().splitlines()[-1]
+    assert not (tmp_path / "VERSUS.md").exists()

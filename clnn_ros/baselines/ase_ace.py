@@ -98,6 +98,11 @@ class AseAce:
         self._prediction = float(self.critic_weights[box])
         return int(self._output > 0.0)
 
+    def frozen_action(self, observation) -> int:
+        """The learned action for a Gymnasium observation without the exploring noise, y =
+        f(w x): the policy as it is played frozen."""
+        return int(self.action_weights[boxes(observation)] >= 0.0)
+
     def learn(self, next_box: int | None, failed: bool, truncated: bool) -> None:
         """Ends time t (weights to t+1, traces take in x(t), y(t)) and computes r_hat(t+1) from
         the box of x(t+1): r = -1 and p = 0 on failure. At the episode's end (failure or
@@ -128,8 +133,15 @@ class AseAce:
         self._internal_reinforcement = 0.0
 
 
+def new_agent(seed: int) -> AseAce:
+    """The seed's ASE/ACE: the paper's values, its noise from a spawned child of
+    SeedSequence(seed) (train's docstring says why)."""
+    return AseAce(AseAceParams(), np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0]))
+
+
 def train(seed: int, max_episodes: int,
-          env_factory: Callable[[], gymnasium.Env] | None = None) -> np.ndarray:
+          env_factory: Callable[[], gymnasium.Env] | None = None,
+          agent: AseAce | None = None) -> np.ndarray:
     """The returns (steps, the failing one included) of up to max_episodes episodes of one
     ASE/ACE, stopping once it has solved CartPole-v1 (core.solving). Deterministic for a seed.
 
@@ -139,7 +151,7 @@ def train(seed: int, max_episodes: int,
     PCG64(SeedSequence(seed)), the very stream default_rng(seed) would give the agent.
     """
     env = env_factory() if env_factory is not None else gymnasium.make("CartPole-v1")
-    agent = AseAce(AseAceParams(), np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0]))
+    agent = agent if agent is not None else new_agent(seed)  # given: the caller keeps it
     returns: list[int] = []
     try:
         for episode in range(max_episodes):

@@ -13,6 +13,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import yaml
@@ -29,6 +30,7 @@ class TrainingRun:
     env_steps: np.ndarray  # the agent's environment steps when each ended
     cpu_s: float  # the process's CPU time for the training (every thread)
     budget: int  # rl-zoo3's n_timesteps
+    action: Callable[[object], int]  # the trained policy, deterministic: observation -> action
 
 
 def zoo_entry(algorithm: str) -> tuple[dict, Path]:
@@ -85,4 +87,5 @@ def train(algorithm: str, seed: int) -> TrainingRun:
     model.learn(total_timesteps=n_timesteps, callback=EpisodeRecorder())
     cpu_s = time.process_time() - began
     env.close()
-    return TrainingRun(np.array(returns), np.array(env_steps), cpu_s, n_timesteps)
+    return TrainingRun(np.array(returns), np.array(env_steps), cpu_s, n_timesteps,
+                       lambda observation: int(model.predict(observation, deterministic=True)[0]))

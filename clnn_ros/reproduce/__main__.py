@@ -53,6 +53,7 @@ from .sensitivity import (SENSITIVITY_SEEDS, check_sweep_names, parse_grid,
 from .goals import REPORT_SEEDS, SELECT_SEEDS as GOAL_SELECT_SEEDS, PLAY_EPISODES, goals_study, \
     goals_markdown, plot_curves, write_goals
 from .report import claims_markdown, data_files_markdown, header_markdown, write_report
+from .versus import AGENTS, check_agents, run_versus, write_versus
 
 PRESET_HELP = ("a named set of parameter values (" + ", ".join(PRESETS) + "; the command "
                "'presets' lists them) that the other flags and --options override")
@@ -226,6 +227,20 @@ def run_all(args) -> None:
           f"in {time.perf_counter() - start:.0f} s")
 
 
+def cmd_versus(args) -> None:
+    seeds = parse_seeds(args.seeds)
+    agents = [a.strip() for a in args.agents.split(",") if a.strip()]
+    check_agents(agents)
+    if args.workers < 1:
+        raise ValueError(f"--workers must be at least 1, got {args.workers}")
+    out = Path(args.out)
+    began = time.perf_counter()
+    results = run_versus(agents, seeds, out / "data" / "versus", args.workers)
+    path = write_versus(results, args.seeds, out, time.perf_counter() - began)
+    print(path.read_text())
+    print(f"wrote {path}")
+
+
 def cmd_goals(args) -> None:
     out = Path(args.out)
     study = goals_study(parse_seeds(args.report_seeds), parse_seeds(args.select_seeds),
@@ -327,6 +342,19 @@ def build_parser() -> argparse.ArgumentParser:
     gl.add_argument("--episodes", type=int, default=PLAY_EPISODES,
                     help="frozen-weights episodes in gymnasium per seed")
     gl.set_defaults(func=cmd_goals)
+
+    vs = sub.add_parser("versus", help="CartPole-v1 as the RL field measures agents: the RLN "
+                                       "agent beside ASE/ACE, PPO and DQN: OUT/VERSUS.md")
+    vs.add_argument("--seeds", default=REPORT_SEEDS, help="seeds, every agent the same")
+    vs.add_argument("--agents", default=",".join(AGENTS),
+                    help=f"comma-separated, of: {', '.join(AGENTS)} (ppo and dqn need pip "
+                         "install -e '.[baselines]')")
+    vs.add_argument("--out", default="docs", help="folder for VERSUS.md, figures/ and data/ "
+                                                  "(finished agent-seeds are kept in "
+                                                  "data/versus/)")
+    vs.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+                    help="processes for the agents other than rln (default: one per CPU)")
+    vs.set_defaults(func=cmd_versus)
 
     al = sub.add_parser("all", help="everything, then writes OUT/REPRODUCTION.md")
     al.add_argument("--out", default="docs",
