@@ -41,11 +41,12 @@ from .graph.names import NOT_STARTED, PER_TICK, RECORDER, TRIAL_MANAGER, namespa
 from .graph.run import DEMO, ENVIRONMENTS, OWN_TAU, RUN_SETTINGS, default_bag_path, run_values
 from .graph.ticks import (RUN_END_NOTE, RUN_LAST_TICK_NOTE, TICKS_RECORD, TickRanges,
                           describe_ranges)
-from .init_weights import OPTIMAL, episode_start
-from .process_signals import STOP_SIGNALS, catch_signals
-from .rosenv import domain_id_problem
-from .supervise import (NODES, Supervisor, fresh_summary, report_failure, run_separate, say,
-                        start_recorder, stop_recorder, work_directory)
+from .core.init_weights import OPTIMAL, episode_start
+from .session.process_signals import STOP_SIGNALS, catch_signals
+from .session.rosenv import domain_id_problem
+from .processes.supervise import (NODES, Supervisor, fresh_summary, report_failure,
+                                  run_separate, say, start_recorder, stop_recorder,
+                                  work_directory)
 
 # --env-node: a command starting with one of these runs with run_all's interpreter (its venv).
 PYTHON_NAMES = ("python", "python3")
@@ -266,7 +267,7 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
                   f"rest is ready)", flush=True)
         failed = recorder_forced = False
         if args.composed:
-            from .composed import run_composed  # loads rclpy and the nodes
+            from .processes.composed import run_composed  # loads rclpy and the nodes
             status, reason = run_composed(values, environment is not None, namespace,
                                           interrupted)
         else:

@@ -1,7 +1,7 @@
 """A cart-pole with friction and a noisy actuator, written only against docs/ENV_CONTRACT.md
 (rclpy and the message packages, no clnn_ros code).
     python -m clnn_ros.run_all --env-node "python examples/noisy_cartpole.py"
-    python -m clnn_ros.check_env_node python examples/noisy_cartpole.py --ros-args \\
+    python -m clnn_ros.live.check_env python examples/noisy_cartpole.py --ros-args \\
         -p force_noise:=0.2
 Its own parameters (-p on its command line): cart_friction, pole_friction, force_noise.
 Topic names are relative: `--ros-args -r __ns:=/robot1 -r /clock:=/robot1/clock` moves it.

@@ -20,12 +20,12 @@ EXECUTABLES = {
     "trial_manager": "clnn_ros.nodes.trial_manager:main",
     "recorder": "clnn_ros.nodes.recorder:main",
     "run_all": "clnn_ros.run_all:main",
-    "echo": "clnn_ros.echo:main",
-    "topics": "clnn_ros.topics:main",
-    "analyze": "clnn_ros.analyze:main",
+    "echo": "clnn_ros.live.echo:main",
+    "topics": "clnn_ros.live.topics:main",
+    "analyze": "clnn_ros.analysis.analyze:main",
     "reproduce": "clnn_ros.reproduce.__main__:main",
-    "check_env": "clnn_ros.check_env_node:main",
-    "save_checkpoint": "clnn_ros.save_checkpoint:main",
+    "check_env": "clnn_ros.live.check_env:main",
+    "save_checkpoint": "clnn_ros.live.save_checkpoint:main",
 }
 
 # Each executable is a small script that imports its function from whichever clnn_ros is on the
@@ -65,7 +65,7 @@ if __name__ == "__main__":
         name=PACKAGE,
         version=ElementTree.parse(HERE / "package.xml").findtext("version"),
         packages=find_packages(include=[PACKAGE, f"{PACKAGE}.*"]),
-        package_data={PACKAGE: ["fastdds_loopback.xml", "fastdds_subnet.xml"]},
+        package_data={f"{PACKAGE}.session": ["fastdds_loopback.xml", "fastdds_subnet.xml"]},
         data_files=[
             ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
             (f"share/{PACKAGE}", ["package.xml"]),

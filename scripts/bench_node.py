@@ -116,7 +116,7 @@ def run_composed(values: dict, ticks_file: Path | None, profile_file: Path | Non
     from rclpy.parameter import Parameter
 
     from clnn_ros.nodes.glue import close_node
-    from clnn_ros.rclpy_session import ros_session, spin_until_finished
+    from clnn_ros.session.rclpy_session import ros_session, spin_until_finished
 
     sim_time = dict(parameter_overrides=[Parameter("use_sim_time", value=True)])
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from bench_settings import (OWN_TIME_ROLES, REPO, ROLES, RUN_TIMEOUT_S, SEED,
                             TEARDOWN_GRACE_S)
-from clnn_ros import rosenv
+from clnn_ros.session import rosenv
 
 NODE_ENTRY = REPO / "scripts" / "bench_node.py"
 BENCHMARK = REPO / "scripts" / "benchmark_graph.py"

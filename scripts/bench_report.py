@@ -84,10 +84,10 @@ def transport_section(by_layout: dict, repeats: int) -> list[str]:
         "## Transport: UDP on loopback against shared memory",
         "",
         "Every run above is on the project's default transport, Fast DDS's UDPv4 on the "
-        "loopback interface alone (`clnn_ros/fastdds_loopback.xml`). The same graph and UInt64 "
+        "loopback interface alone (`clnn_ros/session/fastdds_loopback.xml`). The same graph and UInt64 "
         "ring (EventsExecutor) ran in the same rounds on shared memory, the default before "
         "2026-12-05: `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST` with a profile of the user's "
-        "own (a copy of `clnn_ros/fastdds_subnet.xml`), to which rmw_fastrtps adds its "
+        "own (a copy of `clnn_ros/session/fastdds_subnet.xml`), to which rmw_fastrtps adds its "
         "shared-memory and UDP transports. Best of "
         f"{repeats} (range); UDP / shared memory as best over best and as the median of the "
         "rounds' own ratios; the UDP graph is to keep at least "
@@ -129,7 +129,7 @@ def report(rows, paced, ser, composed, separate, sizes, quick, elapsed, loads, s
         + (" **--quick: one run of each, few ticks: a smoke test, not a measurement.**"
            if quick else ""),
         "",
-        "Every process (graph, ring, paced environment) runs under `clnn_ros.rosenv`'s "
+        "Every process (graph, ring, paced environment) runs under `clnn_ros.session.rosenv`'s "
         f"defaults: Fast DDS profile `FASTRTPS_DEFAULT_PROFILES_FILE="
         f"{shown_path(os.environ.get('FASTRTPS_DEFAULT_PROFILES_FILE', ''))}` (UDPv4 on the "
         "loopback interface alone; the transport section compares shared memory), "
@@ -149,7 +149,8 @@ def report(rows, paced, ser, composed, separate, sizes, quick, elapsed, loads, s
         f"{sizes['graph_trials']['events']} ({by_layout['separate']['ticks']} ticks) with the "
         f"EventsExecutor (the default), N = {sizes['graph_trials']['single']} "
         f"({rows[2]['ticks']} ticks) with rclpy's SingleThreadedExecutor "
-        "(`CLNN_ROS_EXECUTOR=single`, read by `clnn_ros/rclpy_session.py:make_executor`). The "
+        "(`CLNN_ROS_EXECUTOR=single`, read by "
+        "`clnn_ros/session/rclpy_session.py:make_executor`). The "
         "runs carry the latency timing (below): two clock readings and two list appends per tick "
         "in the trial manager, under 1 us of a tick.",
         "* **Raw ring**: 5 nodes (in 5 processes, or composed in 1 on one executor) that "

@@ -114,8 +114,8 @@ def ring_result(tm, ticks: int) -> None:
 
 def ring_composed(a) -> int:
     """All five ring nodes in one process, one executor."""
-    from clnn_ros.rclpy_session import ros_session
-    from clnn_ros.rclpy_session import make_executor
+    from clnn_ros.session.rclpy_session import ros_session
+    from clnn_ros.session.rclpy_session import make_executor
     with ros_session([sys.argv[0]]):
         nodes = {role: ring_node(role, a.msgs, a.ticks) for role in ROLES}
         executor = make_executor()
@@ -142,8 +142,8 @@ def ring_stage(a) -> int:
     ends the run with a latched stop message."""
     from rclpy.duration import Duration
     from clnn_ros.nodes.glue import READY_QOS
-    from clnn_ros.rclpy_session import ros_session
-    from clnn_ros.rclpy_session import make_executor
+    from clnn_ros.session.rclpy_session import ros_session
+    from clnn_ros.session.rclpy_session import make_executor
     from std_msgs.msg import String
 
     with ros_session([sys.argv[0]]):

@@ -7,7 +7,8 @@ a robot runs it), idle and under CPU hogs, and a profile of the graph.
 About 6 minutes (--quick: about 2 minutes, one run of each with fewer ticks, a smoke test;
 it prints the report and writes it only with --out). The ROS domain is the environment's
 ROS_DOMAIN_ID (ROS's default 0 when unset; give the benchmark a domain of its own), DDS discovery
-stays on loopback (clnn_ros.rosenv's defaults apply to every process started here: the graph's,
+stays on loopback (clnn_ros.session.rosenv's defaults apply to every process started here: the
+graph's,
 the ring's, the benchmark's own).
 
 1. Throughput (ticks/s): the graph, started as `python -m clnn_ros.run_all --quiet --no-record
@@ -26,7 +27,7 @@ the ring's, the benchmark's own).
    messages (the transport yardstick) and the graph's own message types with fixed content.
    The ring runs under the same rosenv defaults (its Fast DDS profile file), with the graph's
    QoS object (clnn_ros.nodes.glue.LOCKSTEP_QOS, from clnn_ros.graph.qos.LOCKSTEP; the report
-   states its depth) and the graph's executor factory (clnn_ros.rclpy_session.make_executor,
+   states its depth) and the graph's executor factory (clnn_ros.session.rclpy_session.make_executor,
    CLNN_ROS_EXECUTOR). EventsExecutor (the
    default) and rclpy's SingleThreadedExecutor (CLNN_ROS_EXECUTOR=single). Every configuration
    runs REPEATS times, round robin; the best (highest) rate counts, the least disturbed by other
@@ -78,7 +79,7 @@ from bench_settings import (DEADLINE_MS, EXECUTORS, FULL, LAYOUTS, PERIOD_MS, QU
 
 
 def main_benchmark(a) -> int:
-    from clnn_ros import rosenv  # noqa: F401  (the project's defaults, for every child too)
+    from clnn_ros.session import rosenv  # noqa: F401  (the project's defaults, for every child too)
     sizes = QUICK if a.quick else FULL
     if not os.environ.get("ROS_DOMAIN_ID"):
         print("benchmark_graph: note: ROS_DOMAIN_ID is not set: ROS domain 0 (give the "
@@ -177,7 +178,7 @@ def main() -> int:
         if a.out is None and not a.quick:
             a.out = REPO / "docs" / "benchmark_graph.md"
         return main_benchmark(a)
-    from clnn_ros import rosenv  # noqa: F401  (the graph's DDS defaults, before rclpy loads)
+    from clnn_ros.session import rosenv  # noqa: F401  (DDS defaults, before rclpy loads)
     if a.executor:
         os.environ["CLNN_ROS_EXECUTOR"] = a.executor
     return ring_stage(a) if a.mode == "ring-stage" else ring_composed(a)

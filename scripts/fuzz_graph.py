@@ -48,7 +48,7 @@ import sys
 import time
 from collections import Counter
 
-from clnn_ros import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy)
+from clnn_ros.session import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy)
 
 from rclpy.duration import Duration
 from rclpy.node import Node
@@ -61,7 +61,7 @@ from clnn_ros.graph import qos
 from clnn_ros.graph.content import RULES
 from clnn_ros.graph.names import (ACTION, CLOCK, REWARD, SIM_TIME_NODES, SPIKES, STATE,
                                   TRIAL_EVENT, TRIAL_MANAGER, WEIGHTS)
-from clnn_ros.rclpy_session import make_executor, qos_profile, ros_session
+from clnn_ros.session.rclpy_session import make_executor, qos_profile, ros_session
 from fuzz_messages import (FAR, STALE, STALE_FROM, TYPES, WELL_FORMED, MessageMaker, clock_tick,
                            schedule)
 

@@ -25,7 +25,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from clnn_ros.rosenv import processes_with_env
+from clnn_ros.session.rosenv import processes_with_env
 
 RSS_BOUND_MB = 20.0  # allowed resident-memory growth over the in-process runs (allocator noise)
 

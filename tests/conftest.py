@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from clnn_ros.process_signals import SHOW_STACKS
+from clnn_ros.session.process_signals import SHOW_STACKS
 
 
 # The longest test files, longest first (seconds per file in a suite run, scripts/test.sh

@@ -1,4 +1,5 @@
-"""The pictures of clnn_ros.analyze: the files it writes from the sample bag (valid PNGs, a GIF of
+"""The pictures of clnn_ros.analysis.analyze: the files it writes from the sample bag (valid PNGs,
+a GIF of
 the frames expected, summary.md naming them), the figures' contents checked on their matplotlib
 objects (colour bar, the bag's labels, segments from 0, axes scaled to the motion, a raster that
 stays readable at 10,000 ticks), refused arguments leaving nothing behind, and the environment
@@ -14,10 +15,10 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from clnn_ros import analysis_figures as pictures
-from clnn_ros import analyze as analysis
-from clnn_ros.analysis_data import metadata_record
-from clnn_ros.analysis_summary import environment_lines
+from clnn_ros.analysis import figures as pictures
+from clnn_ros.analysis import analyze as analysis
+from clnn_ros.analysis.data import metadata_record
+from clnn_ros.analysis.summary import environment_lines
 from clnn_ros.bag import open_bag
 from clnn_ros.core.params import Params
 from clnn_ros.figures import plt
@@ -34,7 +35,7 @@ CHOSEN = 11   # 769 ticks, ends at the cart position limit: an overview, two win
 
 
 def analyze(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "clnn_ros.analyze", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "clnn_ros.analysis", *map(str, args)],
                           capture_output=True, text=True, timeout=HANG_S, cwd=cwd)
 
 
@@ -286,7 +287,7 @@ def test_a_run_with_its_own_environment_node_says_so(ros_env, tmp_path):
     ("runs/lone.mcap", "runs/lone_analysis"),
 ])
 def test_default_out_is_beside_the_bag(tmp_path, given, expected):
-    from clnn_ros.analyze import default_out
+    from clnn_ros.analysis.analyze import default_out
     bag_dir = tmp_path / "runs" / "bag"
     bag_dir.mkdir(parents=True)
     (bag_dir / "metadata.yaml").write_text("")

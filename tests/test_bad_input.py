@@ -234,7 +234,7 @@ def test_a_node_started_by_hand_refuses_bad_parameters(workdir, node, ros_args, 
 @pytest.mark.parametrize("domain", ["233", "-1", "one"])
 @pytest.mark.parametrize("program", [["-m", "clnn_ros.run_all", "--trials", "1"],
                                      ["-m", "clnn_ros.nodes.agent"],
-                                     ["-m", "clnn_ros.echo", "/rln/spikes"]])
+                                     ["-m", "clnn_ros.live.echo", "/rln/spikes"]])
 def test_a_domain_id_dds_cannot_use_is_refused_before_ros_starts(workdir, monkeypatch, program,
                                                                   domain):
     """Fast DDS ends a process whose domain has ports past 65535 with status 1 and a line on

@@ -17,7 +17,7 @@ from clnn_ros.core.episode import run_episode
 from clnn_ros.core.optimal import optimal_weights
 from clnn_ros.core.params import Params
 from clnn_ros.core.physics import CONTINUE
-from clnn_ros.init_weights import EpisodeStart, episode_start, load_weights
+from clnn_ros.core.init_weights import EpisodeStart, episode_start, load_weights
 
 from conftest import free_domain_id, ros_environment
 from test_graph import run_all
@@ -160,7 +160,7 @@ def test_graph_fig7_weights_equal_the_core_and_the_save_service(ros_env, tmp_pat
         env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     while "trial    1/" not in (line := run.stdout.readline()):
         assert line, run.communicate()[1]
-    saved = subprocess.run([sys.executable, "-m", "clnn_ros.save_checkpoint"], env=ros_env,
+    saved = subprocess.run([sys.executable, "-m", "clnn_ros.live.save_checkpoint"], env=ros_env,
                            capture_output=True, text=True, timeout=30, check=False)
     _, stderr = run.communicate(timeout=120)
     assert run.returncode == 0, stderr

@@ -1,6 +1,6 @@
-"""clnn_ros.echo prints as `ros2 topic echo` does (rosidl_runtime_py's message_to_yaml and
+"""clnn_ros.live.echo prints as `ros2 topic echo` does (rosidl_runtime_py's message_to_yaml and
 message_to_csv: block-style YAML, --flow-style, --csv, `{}` for a message without fields), and
-clnn_ros.topics --count counts every endpoint of a graph of several participants."""
+clnn_ros.live.topics --count counts every endpoint of a graph of several participants."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import pytest
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Byte, Empty, UInt8MultiArray
 
-from clnn_ros.echo import to_csv, to_yaml
+from clnn_ros.live.echo import to_csv, to_yaml
 from clnn_ros_msgs.msg import CartPoleState, InputLabels, Reward, SpikeVector, TrialEvent
 
 from test_graph import wait_for_line
@@ -71,7 +71,7 @@ def test_scalars_bytes_and_arrays_as_rosidl_runtime_py_writes_them():
     (["--raster", "--field", "tick"], "echo: error: --raster prints whole SpikeVectors: not with --field"),
 ])
 def test_options_that_do_not_go_together(options, error):
-    run = subprocess.run([sys.executable, "-m", "clnn_ros.echo", "/rln/spikes", *options],
+    run = subprocess.run([sys.executable, "-m", "clnn_ros.live.echo", "/rln/spikes", *options],
                          capture_output=True, text=True, timeout=60)
     assert run.returncode == 2 and run.stderr == error + "\n"
 
@@ -101,7 +101,7 @@ def stop(probes) -> None:
 
 def echo_once(env, topic, *options) -> str:
     # not one of the graph's topics: it must be discovered (a generous bound on a loaded machine)
-    run = tool(env, "clnn_ros.echo", topic, "--once", "--wait", "60", *options)
+    run = tool(env, "clnn_ros.live.echo", topic, "--once", "--wait", "60", *options)
     assert run.returncode == 0 and run.stderr == "", run.stderr
     return run.stdout
 
@@ -114,7 +114,7 @@ def test_fast_dds_logs_to_standard_error_not_standard_output(tmp_path):
     """Standard output is a tool's (fastdds_loopback.xml): Fast DDS's Error for a domain whose
     ports pass 65535, got by a process without the tools' check of ROS_DOMAIN_ID, goes to
     standard error (Fast DDS then ends the process, with a plain line of its own on stdout)."""
-    create_a_node = "import clnn_ros.rosenv, rclpy; rclpy.init(); rclpy.create_node('n')"
+    create_a_node = "import clnn_ros.session.rosenv, rclpy; rclpy.init(); rclpy.create_node('n')"
     run = subprocess.run([sys.executable, "-c", create_a_node],
                          capture_output=True, text=True,
                          env={**os.environ, "ROS_DOMAIN_ID": "233", "ROS_LOG_DIR": str(tmp_path)},
@@ -154,7 +154,7 @@ def test_topics_counts_every_endpoint_of_several_participants(ros_env):
     probes = [start_probe(ros_env, "/probe/counted", "std_msgs/msg/Empty", "{}", nodes=2)
               for _ in range(3)]
     try:
-        listed = tool(ros_env, "clnn_ros.topics", "--count")
+        listed = tool(ros_env, "clnn_ros.live.topics", "--count")
         assert listed.returncode == 0 and listed.stderr == "", listed.stderr
         assert listed.stdout.splitlines() == [
             "/parameter_events [rcl_interfaces/msg/ParameterEvent]  publishers 6, subscribers 0",

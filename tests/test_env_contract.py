@@ -23,7 +23,7 @@ import yaml
 from clnn_ros import run_all
 from clnn_ros.batch import run_batch
 from clnn_ros.check_env.rules import CHECKED_RUN, RUN_PHYSICS, check_physics
-from clnn_ros.check_env_node import RULES
+from clnn_ros.live.check_env import RULES
 from clnn_ros.core.encoder import Encoder
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.gym_physics import GymCartPole, gym_matched_params
@@ -87,7 +87,7 @@ def checks(ros_env):
     """All checker runs at once, each in its own namespace of the module's domain (they mostly
     wait on the node)."""
     running = {name: subprocess.Popen(
-        [PY, "-m", "clnn_ros.check_env_node", "--domain-id", DOMAIN_ID, "--namespace",
+        [PY, "-m", "clnn_ros.live.check_env", "--domain-id", DOMAIN_ID, "--namespace",
          f"/check_{name}", *options, *command],
         cwd=ROOT, env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
         for name, (command, options, _) in CHECKS.items()}
@@ -375,7 +375,7 @@ READY_LISTENER = """
 import rclpy
 from std_msgs.msg import String
 from clnn_ros.graph import qos
-from clnn_ros.rclpy_session import qos_profile
+from clnn_ros.session.rclpy_session import qos_profile
 rclpy.init()
 node = rclpy.create_node("_ready_listener")
 node.create_subscription(String, "/waiting/_graph/ready", lambda m: print(m.data, flush=True),

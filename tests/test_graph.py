@@ -18,7 +18,7 @@ import pytest
 
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
-from clnn_ros.rosenv import processes_with_env
+from clnn_ros.session.rosenv import processes_with_env
 
 from conftest import HANG_S, free_domain_id, not_lttng, ros_environment
 

@@ -67,7 +67,7 @@ def link():
 @pytest.fixture(scope="module")
 def base_env(tmp_path_factory):
     """The caller's environment without any DDS discovery choice, so that run_all's own default
-    (clnn_ros/rosenv.py) is what is tested."""
+    (clnn_ros/session/rosenv.py) is what is tested."""
     env = {k: v for k, v in os.environ.items()
            if k not in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_STATIC_PEERS")}
     return {**env, "ROS_LOG_DIR": str(tmp_path_factory.mktemp("ros_log"))}

@@ -13,8 +13,9 @@ import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-OFFLINE = ("clnn_ros.analyze", "clnn_ros.bag", "clnn_ros.echo", "clnn_ros.topics",
-           "clnn_ros.graph.names", "clnn_ros.graph.qos", "clnn_ros.graph.fields")
+OFFLINE = ("clnn_ros.analysis.analyze", "clnn_ros.bag", "clnn_ros.live.echo",
+           "clnn_ros.live.topics", "clnn_ros.graph.names", "clnn_ros.graph.qos",
+           "clnn_ros.graph.fields")
 
 
 def test_the_core_imports_nothing_outside_it():
@@ -35,7 +36,7 @@ def test_offline_tools_load_neither_rclpy_nor_numba():
     assert loaded == "[]"
     # CPU time, not wall time: other test runs share the machine's cores
     before = cpu_seconds_of_children()
-    subprocess.run([sys.executable, "-m", "clnn_ros.analyze", "--help"], capture_output=True,
+    subprocess.run([sys.executable, "-m", "clnn_ros.analysis", "--help"], capture_output=True,
                    check=True)
     assert cpu_seconds_of_children() - before < 1.0
 
@@ -43,7 +44,7 @@ def test_offline_tools_load_neither_rclpy_nor_numba():
 def test_the_graphs_processes_load_no_numba():
     """Numba is the batch engine's alone: in each of a graph's processes it would be two thirds
     of the start-up (core.jitable)."""
-    modules = ["clnn_ros.run_all", "clnn_ros.composed", "clnn_ros.nodes.recorder",
+    modules = ["clnn_ros.run_all", "clnn_ros.processes.composed", "clnn_ros.nodes.recorder",
                *(f"clnn_ros.nodes.{name}" for name in ("environment", "encoder", "reward",
                                                        "agent", "trial_manager"))]
     check = f"import sys, {', '.join(modules)}; print('numba' in sys.modules)"
@@ -104,10 +105,59 @@ def test_no_node_module_imports_another():
     nodes = ROOT / "clnn_ros" / "nodes"
     for path in sorted(nodes.glob("*.py")):
         others = {f"clnn_ros.nodes.{p.stem}" for p in nodes.glob("*.py")} - \
-            {f"clnn_ros.nodes.{path.stem}", "clnn_ros.nodes.glue", "clnn_ros.nodes.__init__"}
+            {f"clnn_ros.nodes.{path.stem}", "clnn_ros.nodes.glue", "clnn_ros.nodes.markers",
+             "clnn_ros.nodes.__init__"}
         assert not imported_modules(path, "clnn_ros.nodes") & others, path.name
 
 
 def test_no_project_file_is_past_400_lines():
     for path in sorted((ROOT / "clnn_ros").rglob("*.py")):
         assert len(path.read_text().splitlines()) <= 400, path.relative_to(ROOT)
+
+
+# The import directions of the README's table: each part of clnn_ros (a folder, or a module at
+# the top) and the other parts it may import.
+MAY_IMPORT = {
+    "core": set(), "cli": set(), "files": set(), "figures": set(),
+    "batch": {"core"},
+    "baselines": {"core"},
+    "reproduce": {"core", "batch", "baselines", "figures", "cli"},
+    "graph": {"core"},
+    "session": {"core", "graph"},
+    "bag": {"graph", "files", "cli"},
+    "nodes": {"core", "graph", "session", "bag", "files"},
+    "processes": {"core", "graph", "session", "files", "nodes"},
+    "run_all": {"core", "graph", "session", "processes", "bag", "cli", "files"},
+    "analysis": {"core", "graph", "bag", "files", "cli", "figures"},
+    "check_env": {"core", "graph", "session"},
+    "live": {"graph", "bag", "check_env", "session", "cli"},
+    "lab": {"core", "graph", "session", "cli"},
+}
+
+
+def part_of(module: str) -> str:
+    return module.split(".")[1] if module.count(".") else module
+
+
+def test_each_part_imports_only_what_the_readme_says_and_none_upwards():
+    found = {}
+    for path in sorted((ROOT / "clnn_ros").rglob("*.py")):
+        if path.parent == ROOT / "clnn_ros" and path.name == "__init__.py":
+            continue  # the package's own, empty
+        module = ".".join(path.relative_to(ROOT).with_suffix("").parts)
+        package = module.rsplit(".", 1)[0]
+        part = part_of(module)
+        imports = {part_of(m) for m in imported_modules(path, package)
+                   if m.startswith("clnn_ros.")} - {part}
+        assert imports <= MAY_IMPORT[part], \
+            f"{module} imports {sorted(imports - MAY_IMPORT[part])}"
+        found.setdefault(part, set()).update(imports)
+    assert set(found) == set(MAY_IMPORT)  # every part is in the table
+    # the table itself has no cycle: its parts sort so that each imports only earlier ones
+    ordered, left = [], dict(MAY_IMPORT)
+    while left:
+        ready = [part for part, uses in left.items() if uses <= set(ordered)]
+        assert ready, f"a cycle among {sorted(left)}"
+        ordered += ready
+        for part in ready:
+            del left[part]

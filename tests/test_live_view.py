@@ -17,7 +17,7 @@ from builtin_interfaces.msg import Time
 
 from clnn_ros.graph import names
 from clnn_ros.graph.run import RUN_SETTINGS
-from clnn_ros.markers import CART, CART_SIZE_M, FRAME, NAMESPACE, POLE, TRACK, CartPoleMarkers
+from clnn_ros.nodes.markers import CART, CART_SIZE_M, FRAME, NAMESPACE, POLE, TRACK, CartPoleMarkers
 
 from conftest import HANG_S, free_domain_id, ros_environment
 

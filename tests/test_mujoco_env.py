@@ -13,7 +13,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from clnn_ros.check_env_node import RULES
+from clnn_ros.live.check_env import RULES
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.gym_physics import gym_matched_params
 from clnn_ros.core.mujoco_physics import MujocoCartPole
@@ -89,7 +89,7 @@ def test_limits_are_checked_after_each_step_the_angle_first():
 @pytest.mark.ros
 def test_contract_checker_passes_the_mujoco_node(ros_env):
     result = subprocess.run(
-        [PY, "-m", "clnn_ros.check_env_node", "--domain-id", DOMAIN_ID, "--namespace",
+        [PY, "-m", "clnn_ros.live.check_env", "--domain-id", DOMAIN_ID, "--namespace",
          "/check_mujoco", PY, "-m", "clnn_ros.nodes.environment", "--ros-args", "-p",
          "simulator:=mujoco"],
         env=ros_env, capture_output=True, text=True, timeout=180)

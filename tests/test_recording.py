@@ -1,6 +1,6 @@
 """Recording (clnn_ros.nodes.recorder via run_all) into rosbag2 bag directories, reading them with
 two independent readers and converting them with rosbags-convert, faults (Ctrl-C, a killed
-recorder and its repaired bag) and the offline analysis (clnn_ros.analyze)."""
+recorder and its repaired bag) and the offline analysis (clnn_ros.analysis.analyze)."""
 
 from __future__ import annotations
 
@@ -50,7 +50,7 @@ def recorded(ros_env, tmp_path_factory):
     assert run.returncode == 0, run.stderr
     assert f"run_all: recording to {out / 'bag'}" in run.stdout
     assert f"run_all: bag {out / 'bag'}" in run.stdout
-    analysis = subprocess.run([sys.executable, "-m", "clnn_ros.analyze", str(out / "bag"),
+    analysis = subprocess.run([sys.executable, "-m", "clnn_ros.analysis", str(out / "bag"),
                                "--out", str(out / "analysis")], capture_output=True, text=True,
                               timeout=HANG_S)
     assert analysis.returncode == 0, analysis.stderr
@@ -133,10 +133,14 @@ def test_bag_layout_is_rosbag2(recorded):
     assert "\n" + "=" * 80 + "\nMSG: builtin_interfaces/Time\n" in text
     assert "\nMSG: " not in summary.schemas[channels[STATE].schema_id].data.decode()
     assert summary.chunk_indexes and all(c.compression == "zstd" for c in summary.chunk_indexes)
-    # The last `rosbag2` record (rosbag2 also writes one when the bag opens) is metadata.yaml's.
+    # The last `rosbag2` record (rosbag2 also writes one when the bag opens) is metadata.yaml's,
+    # but for the notes run_all adds to metadata.yaml once the run has ended (custom_data).
     info = yaml.safe_load(metadata["rosbag2"]["serialized_metadata"])
-    assert {"rosbag2_bagfile_information": info} == \
-        yaml.safe_load((recorded / "bag" / "metadata.yaml").read_text())
+    on_disk = yaml.safe_load((recorded / "bag" / "metadata.yaml").read_text())
+    notes = on_disk["rosbag2_bagfile_information"].pop("custom_data")
+    assert info.pop("custom_data") is None and set(notes) == {"clnn_ros.run_end",
+                                                              "clnn_ros.run_last_tick"}
+    assert {"rosbag2_bagfile_information": info} == on_disk
     assert info["version"] == 9 and info["storage_identifier"] == "mcap"
     assert info["relative_file_paths"] == ["bag_0.mcap"] and info["ros_distro"] == "jazzy"
     assert info["message_count"] == summary.statistics.message_count == \
@@ -299,12 +303,13 @@ def child(process, module: str) -> int:
 
 
 def listed_topics(env, wanted: set[str], *args) -> set[str]:
-    """clnn_ros.topics' lines once they include `wanted`: it lists what discovery has found once
+    """clnn_ros.live.topics' lines once they include `wanted`: it lists what discovery has found
+    once
     it settled, and a run's participants may still be starting. On a loaded machine discovery
-    can take over 10 s (clnn_ros.topics.DEFAULT_WAIT_S)."""
+    can take over 10 s (clnn_ros.live.topics.DEFAULT_WAIT_S)."""
     deadline, lines = time.monotonic() + HANG_S, set()
     while not wanted <= lines and time.monotonic() < deadline:
-        listed = tool(env, "clnn_ros.topics", *args)
+        listed = tool(env, "clnn_ros.live.topics", *args)
         assert listed.returncode == 0, listed.stderr
         lines = set(listed.stdout.splitlines())
     assert wanted <= lines, f"never listed: {sorted(wanted - lines)}; last: {listed.stderr}"
@@ -313,7 +318,8 @@ def listed_topics(env, wanted: set[str], *args) -> set[str]:
 
 @pytest.mark.ros
 def test_echo_topics_then_ctrl_c_leaves_a_complete_bag(ros_env, tmp_path):
-    """Against a live graph: clnn_ros.topics and clnn_ros.echo (YAML, --field, --raster, Ctrl-C,
+    """Against a live graph: clnn_ros.live.topics and clnn_ros.live.echo (YAML, --field, --raster,
+    Ctrl-C,
     an unknown topic); then Ctrl-C to the whole run leaves a finished bag."""
     process = start_run(ros_env, tmp_path)
     wait_for_line(process.stdout, "trial    3/", errors=process.stderr)
@@ -325,20 +331,22 @@ def test_echo_topics_then_ctrl_c_leaves_a_complete_bag(ros_env, tmp_path):
     plumbing = {"/_graph/ready [std_msgs/msg/String]", "/_graph/claim [std_msgs/msg/String]",
                 "/_recorder/progress [std_msgs/msg/UInt64]"}
     assert listed_topics(ros_env, graph | plumbing, "--include-hidden-topics") == graph | plumbing
-    state = tool(ros_env, "clnn_ros.echo", names.absolute(STATE), "--once")
+    state = tool(ros_env, "clnn_ros.live.echo", names.absolute(STATE), "--once")
     assert state.returncode == 0 and state.stdout.endswith("\n---\n")
     fields = yaml.safe_load(state.stdout.split("---")[0])
     assert list(fields) == ["tick", "trial", "cart_position_m", "cart_velocity_m_per_s",
                             "pole_angle_deg", "pole_angular_velocity_deg_per_s", "failure",
                             "successful_steps"]
-    spikes = tool(ros_env, "clnn_ros.echo", "/rln/spikes", "--once")
+    spikes = tool(ros_env, "clnn_ros.live.echo", "/rln/spikes", "--once")
     assert "\nspikes:\n- " in spikes.stdout and "label" not in spikes.stdout
-    labels = tool(ros_env, "clnn_ros.echo", "/rln/input_labels", "--once")  # latched: long sent
+    # latched: long sent
+    labels = tool(ros_env, "clnn_ros.live.echo", "/rln/input_labels", "--once")
     assert labels.stdout.startswith("labels:\n- pole_angle[-inf,-6)deg\n"), labels.stdout
-    tick = tool(ros_env, "clnn_ros.echo", "/rln/action", "--once", "--field", "tick")
+    tick = tool(ros_env, "clnn_ros.live.echo", "/rln/action", "--once", "--field", "tick")
     assert isinstance(yaml.safe_load(tick.stdout.split("---")[0]), int), tick.stdout
     # Marked as the run's: if a wait below fails, the test's cleanup stops it too.
-    raster = subprocess.Popen([sys.executable, "-m", "clnn_ros.echo", "/rln/spikes", "--raster"],
+    raster = subprocess.Popen([sys.executable, "-m", "clnn_ros.live.echo", "/rln/spikes",
+                               "--raster"],
                               env={**ros_env, "CLNN_TEST_RUN": str(tmp_path)},
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     wait_for_line(raster.stdout, "|", timeout=120)
@@ -347,14 +355,15 @@ def test_echo_topics_then_ctrl_c_leaves_a_complete_bag(ros_env, tmp_path):
     _, raster_err = raster.communicate(timeout=10)
     assert raster.returncode == 130 and "Traceback" not in raster_err
     assert line.count("#") == 1 and line.rstrip().endswith("|") and " trial " in line
-    unknown = tool(ros_env, "clnn_ros.echo", "/no/such/topic", "--wait", "0.5")
+    unknown = tool(ros_env, "clnn_ros.live.echo", "/no/such/topic", "--wait", "0.5")
     assert unknown.returncode == 1 and len(unknown.stderr.strip().splitlines()) == 1
     assert "unknown topic '/no/such/topic'" in unknown.stderr
-    bad_name = tool(ros_env, "clnn_ros.echo", "/no such topic")
+    bad_name = tool(ros_env, "clnn_ros.live.echo", "/no such topic")
     assert bad_name.returncode == 1 and bad_name.stderr.startswith(
         "echo: error: '/no such topic' is not a topic name: ") and "Traceback" not in bad_name.stderr
     # A graph topic in another namespace is known without discovery: its fields are checked.
-    bad_field = tool(ros_env, "clnn_ros.echo", "/robot1/rln/action", "--field", "no_such_field")
+    bad_field = tool(ros_env, "clnn_ros.live.echo", "/robot1/rln/action", "--field",
+                     "no_such_field")
     assert bad_field.returncode == 1 and "no_such_field" in bad_field.stderr
 
     os.killpg(process.pid, signal.SIGINT)
@@ -388,11 +397,11 @@ def chunk_state_counts(path: Path) -> list[int]:
 
 class Progress:
     """The recorder's progress (the last tick it holds on every per-tick topic), as
-    clnn_ros.echo prints it from /_recorder/progress."""
+    clnn_ros.live.echo prints it from /_recorder/progress."""
 
     def __init__(self, env, run_dir: Path):
         self.process = subprocess.Popen(
-            [sys.executable, "-m", "clnn_ros.echo", "/" + names.RECORDED, "--wait", "180"],
+            [sys.executable, "-m", "clnn_ros.live.echo", "/" + names.RECORDED, "--wait", "180"],
             env={**env, "CLNN_TEST_RUN": str(run_dir)}, stdout=subprocess.PIPE,
             stderr=subprocess.PIPE, text=True)
         self.last = None
@@ -462,7 +471,7 @@ def test_killed_recorders_bag_is_repaired(ros_env, tmp_path, moment):
         assert sum(chunks) < 3000, chunks
     else:
         assert held - last <= 2 * max(chunks) + 50, (held, last, chunks)  # + progress' lag
-        result = subprocess.run([sys.executable, "-m", "clnn_ros.analyze", str(broken), "--out",
+        result = subprocess.run([sys.executable, "-m", "clnn_ros.analysis", str(broken), "--out",
                                  str(tmp_path / "a"), "--salvage"], capture_output=True,
                                 text=True, timeout=HANG_S)
         assert result.returncode == 0, result.stderr
@@ -518,7 +527,7 @@ def test_repair_on_a_full_disk_says_where_it_could_not_write(tmp_path):
 # --- analyze: bad input ------------------------------------------------------------------------
 
 def analyze(*args):
-    return subprocess.run([sys.executable, "-m", "clnn_ros.analyze", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "clnn_ros.analysis", *map(str, args)],
                           capture_output=True, text=True, timeout=HANG_S)
 
 

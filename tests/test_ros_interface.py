@@ -21,7 +21,7 @@ from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
 from clnn_ros.graph.run import NODE_PARAMETERS
 from clnn_ros.nodes.glue import RCLPY_PARAMETERS
-from clnn_ros.rclpy_session import resend_until_answered
+from clnn_ros.session.rclpy_session import resend_until_answered
 
 from test_graph import processes_with, read_steps, wait_for_line
 
@@ -150,7 +150,7 @@ def test_two_graphs_in_two_namespaces_on_one_domain(ros_env, tmp_path):
     wanted = {"/a/cartpole/state", "/b/cartpole/state", "/a/clock", "/b/rln/action"}
     topics, deadline = set(), time.monotonic() + 90
     while not wanted <= topics and time.monotonic() < deadline:
-        listed = subprocess.run([sys.executable, "-m", "clnn_ros.topics"], env=ros_env,
+        listed = subprocess.run([sys.executable, "-m", "clnn_ros.live.topics"], env=ros_env,
                                 capture_output=True, text=True, timeout=30).stdout
         topics |= {line.split()[0] for line in listed.splitlines()}
     for name, (out, seed, process) in runs.items():

@@ -22,10 +22,11 @@ import pytest
 import yaml
 from catkin_pkg.package import parse_package
 
-from clnn_ros import launch_plan, run_all
+from clnn_ros import run_all
+from clnn_ros.processes import launch_plan
 from clnn_ros.core.params import ParamError
 from clnn_ros.graph.run import node_arguments
-from clnn_ros.launch_plan import Step, Supervision
+from clnn_ros.processes.launch_plan import Step, Supervision
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE_DIR = ROOT / "ros_package"
@@ -272,14 +273,15 @@ def test_colcon_builds_the_package_into_an_install_tree(tmp_path):
     assert (install / "share" / "clnn_ros" / "launch" / "graph.launch.py").is_file()
     assert (install / "share" / "ament_index" / "resource_index" / "packages" / "clnn_ros").is_file()
     site = next((install / "lib").glob("python3*/site-packages"))
-    assert (site / "clnn_ros" / "fastdds_loopback.xml").is_file()
-    assert (site / "clnn_ros" / "fastdds_subnet.xml").is_file()
+    assert (site / "clnn_ros" / "session" / "fastdds_loopback.xml").is_file()
+    assert (site / "clnn_ros" / "session" / "fastdds_subnet.xml").is_file()
     # the executables run the installed code (as `ros2 run` would, with this venv's ROS)
     run_env = {**os.environ, "PYTHONPATH": str(site)}
     agent = subprocess.run([sys.executable, str(install / "lib" / "clnn_ros" / "agent"), "x"],
                            cwd=tmp_path, env=run_env, capture_output=True, text=True, timeout=120)
     assert agent.returncode == 2 and agent.stderr.startswith(
         "agent: error: unexpected arguments ['x']"), agent.stderr
-    where = subprocess.run([sys.executable, "-c", "import clnn_ros.echo; print(clnn_ros.echo.__file__)"],
+    where = subprocess.run([sys.executable, "-c",
+                            "import clnn_ros.live.echo; print(clnn_ros.live.echo.__file__)"],
                            cwd=tmp_path, env=run_env, capture_output=True, text=True, timeout=120)
     assert Path(where.stdout.strip()).is_relative_to(site), where.stderr

@@ -1,4 +1,4 @@
-"""clnn_ros.supervise: how run_all stops a child that does not end by itself."""
+"""clnn_ros.processes.supervise: how run_all stops a child that does not end by itself."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import subprocess
 import sys
 import time
 
-from clnn_ros.supervise import Grace, Supervisor, stopped
+from clnn_ros.processes.supervise import Grace, Supervisor, stopped
 
 IGNORES_SIGTERM = ("import signal, sys, time; signal.signal(signal.SIGTERM, signal.SIG_IGN); "
                    "print('ready', file=sys.stderr, flush=True); time.sleep(60)")
@@ -37,7 +37,8 @@ def test_a_node_that_does_not_stop_in_time_shows_where_it_hangs():
     """Before it terminates a node of its own, run_all has it print the stack of every thread
     (process_signals.SHOW_STACKS), so the run's log says where it hung; another child (an
     --env-node command) is not sent that signal, which could end it."""
-    hangs = ("import signal, sys, time; from clnn_ros.process_signals import catch_signals; "
+    hangs = ("import signal, sys, time\n"
+             "from clnn_ros.session.process_signals import catch_signals\n"
              "received = catch_signals(); print('ready', file=sys.stderr, flush=True)\n"
              "def stuck_here():  # deaf to the first request, ends on the second\n"
              "    while len(received) < 2: time.sleep(0.01)\nstuck_here()")

@@ -1,4 +1,4 @@
-"""The graph's one transport: UDP on the loopback interface (clnn_ros/rosenv.py,
+"""The graph's one transport: UDP on the loopback interface (clnn_ros/session/rosenv.py,
 fastdds_loopback.xml). While a run goes on, none of its processes maps a Fast DDS shared-memory
 file and every UDP socket they hold is bound to 127.0.0.1; a stock ROS 2 process (ROS's own
 defaults: shared memory and UDP) receives the graph's spikes, under LOCALHOST and under SUBNET

@@ -23,7 +23,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from clnn_ros import bag, rosenv
+from clnn_ros import bag
+from clnn_ros.session import rosenv
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
 from clnn_ros.graph.names import PER_TICK, STATE
@@ -148,7 +149,7 @@ def test_the_bag_holds_what_trials_csv_holds_or_says_what_it_lacks(short_lease, 
 
 FORGER = """
 import sys, time, rclpy
-from clnn_ros.rclpy_session import ros_session
+from clnn_ros.session.rclpy_session import ros_session
 from clnn_ros_msgs.msg import SpikeVector
 # as a node of the graph's process: SIGINT ends the loop
 with ros_session(sys.argv) as signals:
@@ -191,7 +192,7 @@ def test_a_recorder_stopped_past_the_stall_timeout_finishes_its_bag_and_the_lack
     ticks = json.loads((tmp_path / "summary.json").read_text())["ticks"]
     assert notes == {"clnn_ros.run_end": lines[-1].removeprefix("run_all: error: "),
                      "clnn_ros.run_last_tick": str(ticks - 2)}, notes  # its last tick unfinished
-    analysis = subprocess.run([sys.executable, "-m", "clnn_ros.analyze", str(tmp_path / "bag"),
+    analysis = subprocess.run([sys.executable, "-m", "clnn_ros.analysis", str(tmp_path / "bag"),
                                "--out", str(tmp_path / "analysis")], env=ros_env,
                               capture_output=True, text=True, timeout=300)
     assert analysis.returncode == 0, analysis.stderr
@@ -240,7 +241,7 @@ def test_a_foreign_publisher_is_named_and_the_run_never_reported_completed(
     assert "completed" not in stdout
     if allowed:  # it went on to the end: every trial
         assert len(steps_of(tmp_path)) == TRIALS
-    analysis = subprocess.run([sys.executable, "-m", "clnn_ros.analyze", str(tmp_path / "bag"),
+    analysis = subprocess.run([sys.executable, "-m", "clnn_ros.analysis", str(tmp_path / "bag"),
                                "--out", str(tmp_path / "analysis")], env=ros_env,
                               capture_output=True, text=True, timeout=300)
     assert analysis.returncode == 0, analysis.stderr
@@ -275,7 +276,7 @@ CLAIMER = """
 import sys, rclpy
 from std_msgs.msg import String
 from clnn_ros.nodes.glue import CLAIM_QOS
-from clnn_ros.rclpy_session import ros_session
+from clnn_ros.session.rclpy_session import ros_session
 from clnn_ros.graph.names import CLAIM
 # another graph's trial manager, as far as its claim goes: published once, kept until SIGINT
 with ros_session(sys.argv) as signals:

@@ -1,4 +1,4 @@
-"""clnn-check-env (clnn_ros.check_env_node): an environment node checked against the contract of
+"""clnn-check-env (clnn_ros.live.check_env): an environment node checked against the contract of
 docs/ENV_CONTRACT.md.
 
     rules      the contract's rules, what was found against them, the rules of a state (no ROS)

@@ -11,7 +11,7 @@ from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 
 from ..graph.names import ACTION, CLOCK, READY, STATE, TRIAL_EVENT, absolute
-from ..rclpy_session import resend_until_answered
+from ..session.rclpy_session import resend_until_answered
 from .probe import APPEAR_S, REPLY_S, Probe
 from .rules import NAME, TYPES, Abort, Findings
 

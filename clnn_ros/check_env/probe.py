@@ -14,7 +14,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable, Iterator
 
-from .. import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
+from ..session import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -27,7 +27,7 @@ from clnn_ros_msgs.msg import Action, CartPoleState, TrialEvent
 from ..graph import qos
 from ..graph.fields import tick_stamp
 from ..graph.names import ACTION, CLOCK, READY, STATE, TRIAL_EVENT
-from ..rclpy_session import qos_profile
+from ..session.rclpy_session import qos_profile
 from .rules import FORCE_N, NAME, TAU_NS
 
 # The message fields of an older environment contract, and which (docs/ENV_CONTRACT.md)

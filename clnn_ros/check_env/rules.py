@@ -15,7 +15,7 @@ from ..core.physics import (in_degrees, physics_constants, physics_step, start_i
 from ..graph.fields import (FAILURE_CART_POSITION, FAILURE_NONE, FAILURE_POLE_ANGLE,
                             FAILURE_REASONS, tick_nanoseconds)
 from ..graph.names import ACTION, CLOCK, READY, STATE, TOPIC_TYPES, TRIAL_EVENT
-from ..process_signals import EXIT_WITH_STDIN
+from ..session.process_signals import EXIT_WITH_STDIN
 
 RULES = {
     "starts": "the command starts a node that keeps running",

@@ -10,7 +10,7 @@ from clnn_ros_msgs.msg import TrialEvent
 
 from ..graph.fields import FAILURE_NONE
 from ..graph.names import STATE
-from ..process_signals import EXIT_WITH_STDIN
+from ..session.process_signals import EXIT_WITH_STDIN
 from .interface import connect
 from .lockstep import Lockstep
 from .probe import APPEAR_S, EXIT_S, Probe

@@ -1,6 +1,7 @@
 """The QoS of the graph's topics, as plain descriptions: no ROS import, so offline tools and
 benchmarks read them without rclpy. A node builds its rclpy QoSProfile from one
-(clnn_ros.rclpy_session.qos_profile). The policy names are those of rclpy's enums in lower case,
+(clnn_ros.session.rclpy_session.qos_profile). The policy names are those of rclpy's enums in lower
+case,
 as rosbag2 writes them.
 """
 

@@ -39,7 +39,7 @@ from ..cli import OneLineArgumentParser
 from ..core.params import ParamError, params_from_strings
 from ..graph.names import namespace_problem
 from ..graph.run import convert_setting
-from ..process_signals import EXIT_WITH_STDIN, catch_signals
+from ..session.process_signals import EXIT_WITH_STDIN, catch_signals
 
 # Addresses of the link: private to the two namespaces, so every run may use the same ones.
 ADDRESSES = ("10.231.0.1", "10.231.0.2")

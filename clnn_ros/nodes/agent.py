@@ -24,7 +24,7 @@ from ..core.checkpoint import capture, save_checkpoint
 from ..core.episode import start_episode
 from ..core.rln import KIND_OF_CODE
 from ..files import describe_write_error
-from ..init_weights import episode_start
+from ..core.init_weights import episode_start
 from ..graph.lockstep import Refusals, TickJoin
 from ..graph.names import ACTION, REWARD, SAVE_CHECKPOINT, SPIKES, TRIAL_EVENT, WEIGHTS
 from ..graph.run import NODE_PARAMETERS

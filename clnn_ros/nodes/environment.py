@@ -13,7 +13,7 @@ message's degrees.
 Tick t: on /clock(t) together with either /trial/event START(t) (reset the pole to the trial's
 initial angle) or /rln/action(t-1) (apply the force, one physics step), publish
 /cartpole/state(t), then (at ticks that are multiples of marker_period_ticks) the cart and pole
-drawn for a 3D view on /cartpole/markers(t) (clnn_ros.markers). Another simulator or a
+drawn for a 3D view on /cartpole/markers(t) (clnn_ros.nodes.markers). Another simulator or a
 robot replaces this node by keeping that contract (docs/ENV_CONTRACT.md; the markers are
 optional there).
 """
@@ -34,7 +34,7 @@ from ..graph.lockstep import Refusals
 from ..graph.names import ACTION, CLOCK, MARKERS, STATE, TRIAL_EVENT
 from .glue import (LOCKSTEP_QOS, Readiness, checked, declare_run_parameters,
                    endpoints_matched, ends_with_the_episode, run_node, use_sim_time)
-from ..markers import CartPoleMarkers
+from .markers import CartPoleMarkers
 
 
 def simulator(name: str, params: Params):

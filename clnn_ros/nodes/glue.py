@@ -27,7 +27,8 @@ from ..graph.names import CLAIM, READY, SIM_TIME_NODES, TRIAL_EVENT
 from ..graph.run import (DESCRIPTIONS, declared_values, node_parameters, read_params_file,
                          names_list)
 from ..graph.watch import claim_order, graph_claim
-from ..rclpy_session import qos_profile, ros_session, spin_until_finished, split_ros_arguments
+from ..session.rclpy_session import (qos_profile, ros_session, spin_until_finished,
+                                      split_ros_arguments)
 
 LOCKSTEP_QOS = qos_profile(qos.LOCKSTEP)
 READY_QOS = qos_profile(qos.READY)

@@ -45,7 +45,7 @@ from ..graph.names import (CLOCK, INPUT_LABELS, OPTIONAL, PER_TICK, RECORDED, RE
                            TOPIC_TYPES, TRIAL_EVENT)
 from ..graph.fields import tick_nanoseconds
 from ..graph.ticks import TICKS_RECORD, TickRanges
-from ..rclpy_session import WithMessageInfo, qos_profile, ros_session, spin_until_finished
+from ..session.rclpy_session import WithMessageInfo, qos_profile, ros_session, spin_until_finished
 from .glue import (LABELS_QOS, PROGRESS_QOS, Readiness, declare_run_parameters,
                    given_parameters, steady_clock, use_sim_time)
 

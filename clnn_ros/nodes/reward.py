@@ -17,7 +17,7 @@ from ..core.rln import NONE, ONE_HOT
 from ..graph.lockstep import Refusals, TickJoin
 from ..graph.names import REWARD, STATE, TRIAL_EVENT
 from ..graph.run import NODE_PARAMETERS
-from ..init_weights import episode_start
+from ..core.init_weights import episode_start
 from .glue import (LOCKSTEP_QOS, Readiness, checked, declare_run_parameters,
                    endpoints_matched, ends_with_the_episode, run_node, use_sim_time)
 

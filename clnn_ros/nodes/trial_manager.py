@@ -51,7 +51,7 @@ from ..graph.names import (ACTION, CLOCK, GRAPH_NODES, NOT_STARTED, PUBLISHED_BY
 from ..graph.qos import RECORDER_WINDOW
 from ..graph.run import NODE_PARAMETERS, names_list
 from ..graph.watch import another_graph, describe_foreign, foreign_publishers, gone, named_twice
-from ..init_weights import episode_start
+from ..core.init_weights import episode_start
 from .glue import (LOCKSTEP_QOS, PROGRESS_QOS, READY_QOS, GraphClaim, Pace, Readiness, checked,
                    declare_run_parameters, endpoints_matched, run_node,
                    steady_clock, use_sim_time)

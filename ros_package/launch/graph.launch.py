@@ -4,7 +4,8 @@
         [env:=gymnasium|mujoco|external] [out:=DIR] [params_file:=FILE] [record:=false]
         [bag:=DIR] [stall_timeout:=S]
 
-Each argument is run_all's option of the same name (clnn_ros.launch_plan): run_all checks them
+Each argument is run_all's option of the same name (clnn_ros.processes.launch_plan): run_all checks
+them
 and makes the parameters files, here written into a temporary folder removed at shutdown.
 
 Supervised as run_all supervises its processes (launch_plan.Supervision, on launch's
@@ -26,7 +27,7 @@ from launch.event_handlers import OnProcessExit, OnShutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from clnn_ros.launch_plan import ARGUMENTS, RECORD, Supervision, plan
+from clnn_ros.processes.launch_plan import ARGUMENTS, RECORD, Supervision, plan
 
 
 class GraphFailed(Exception):

@@ -14,11 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .core.checkpoint import (Checkpoint, CheckpointError, check_resumable, first_line,
+from .checkpoint import (Checkpoint, CheckpointError, check_resumable, first_line,
                               load_checkpoint, restore_counter)
-from .core.optimal import optimal_weights
-from .core.params import Params
-from .core.agent import SuccessCounter
+from .optimal import optimal_weights
+from .params import Params
+from .agent import SuccessCounter
 
 # The names of the optimal weights, and the state variables they are made for.
 OPTIMAL = {"fig7": 1, "fig12": 2}

@@ -27,10 +27,10 @@ from collections import deque
 from pathlib import Path
 from typing import Callable
 
-from .graph.fields import COMPLETED
-from .graph.names import GRAPH_NODES, RECORDER, TRIAL_MANAGER
-from .graph.run import node_arguments, write_params
-from .process_signals import EXIT_WITH_STDIN, SHOW_STACKS
+from ..graph.fields import COMPLETED
+from ..graph.names import GRAPH_NODES, RECORDER, TRIAL_MANAGER
+from ..graph.run import node_arguments, write_params
+from ..session.process_signals import EXIT_WITH_STDIN, SHOW_STACKS
 
 NODES = (*GRAPH_NODES, TRIAL_MANAGER)
 # After the episode ends or Ctrl-C, how long the nodes get to exit by themselves, and then the

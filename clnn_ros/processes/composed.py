@@ -8,14 +8,14 @@ import sys
 
 import rclpy
 
-from .graph.names import clock_remappings
-from .nodes.agent import AgentNode
-from .nodes.encoder import EncoderNode
-from .nodes.environment import EnvironmentNode
-from .nodes.glue import close_node
-from .nodes.reward import RewardNode
-from .nodes.trial_manager import TrialManagerNode
-from .rclpy_session import init_ros, spin_until_finished
+from ..graph.names import clock_remappings
+from ..nodes.agent import AgentNode
+from ..nodes.encoder import EncoderNode
+from ..nodes.environment import EnvironmentNode
+from ..nodes.glue import close_node
+from ..nodes.reward import RewardNode
+from ..nodes.trial_manager import TrialManagerNode
+from ..session.rclpy_session import init_ros, spin_until_finished
 
 
 def run_composed(values: dict, with_environment: bool, namespace: str,

@@ -1,7 +1,8 @@
 """List the topics of the running graph with their types, like `ros2 topic list -t`.
 
-    python -m clnn_ros.topics            # /cartpole/state [clnn_ros_msgs/msg/CartPoleState] ...
-    python -m clnn_ros.topics --count    # and how many publishers and subscribers each has
+    python -m clnn_ros.live.topics            # /cartpole/state [clnn_ros_msgs/msg/CartPoleState]
+    ...
+    python -m clnn_ros.live.topics --count    # and how many publishers and subscribers each has
 
 It listens (DDS discovery) on this ROS_DOMAIN_ID until what it has found is complete and
 settled, prints, exits. Complete: every endpoint's node has announced itself and every node
@@ -18,9 +19,9 @@ import os
 import sys
 import time
 
-from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
+from ..session import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
 
-from .cli import OneLineArgumentParser
+from ..cli import OneLineArgumentParser
 
 # A participant announces itself every 3 s (Fast DDS's default announcement period); one that
 # missed this tool's first announcements is seen at its next one, so a quieter spell than that is
@@ -72,7 +73,7 @@ def discover(node, wait_s: float, received: list[int]) -> tuple[dict, bool]:
 
 
 def main(argv=None) -> int:
-    parser = OneLineArgumentParser(prog="python -m clnn_ros.topics", name="topics",
+    parser = OneLineArgumentParser(prog="python -m clnn_ros.live.topics", name="topics",
                                    description=__doc__.split("\n\n")[0])
     parser.add_argument("--count", action="store_true",
                         help="also the number of publishers and subscribers")
@@ -84,7 +85,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     import rclpy  # after the arguments: --help and a usage error need no ROS
     from rclpy.topic_or_service_is_hidden import topic_or_service_is_hidden
-    from .rclpy_session import ros_session
+    from ..session.rclpy_session import ros_session
     with ros_session() as received:
         # hidden (ROS's convention) and this process's own: its endpoints are left out
         node = rclpy.create_node(f"_topics_{os.getpid()}", start_parameter_services=False,

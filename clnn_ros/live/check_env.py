@@ -1,8 +1,10 @@
 """Check that an environment node keeps the contract of docs/ENV_CONTRACT.md.
 
-    python -m clnn_ros.check_env_node python -m clnn_ros.nodes.environment --ros-args -p physics:=paper
-    python -m clnn_ros.check_env_node python -m clnn_ros.nodes.environment --ros-args -p simulator:=gymnasium
-    python -m clnn_ros.check_env_node python examples/noisy_cartpole.py
+    python -m clnn_ros.live.check_env python -m clnn_ros.nodes.environment --ros-args -p
+    physics:=paper
+    python -m clnn_ros.live.check_env python -m clnn_ros.nodes.environment --ros-args -p
+    simulator:=gymnasium
+    python -m clnn_ros.live.check_env python examples/noisy_cartpole.py
 
 It starts the command in its own process as run_all would (with `--ros-args --params-file
 <file> -r __ns:=/NS -r /clock:=/NS/clock` appended, the file holding every parameter an
@@ -27,14 +29,14 @@ import sys
 import tempfile
 from pathlib import Path
 
-from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
+from ..session import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
 
-from .check_env.rules import (CHECKED_RUN, MAX_STEPS, RULES, RUN_PHYSICS, STRICT_PHYSICS,
+from ..check_env.rules import (CHECKED_RUN, MAX_STEPS, RULES, RUN_PHYSICS, STRICT_PHYSICS,
                               physics_summary)
-from .cli import OneLineArgumentParser
-from .graph.names import ENV_CONTRACT_VERSION, namespace_problem
-from .graph.run import run_values, write_params
-from .process_signals import EXIT_WITH_STDIN
+from ..cli import OneLineArgumentParser
+from ..graph.names import ENV_CONTRACT_VERSION, namespace_problem
+from ..graph.run import run_values, write_params
+from ..session.process_signals import EXIT_WITH_STDIN
 
 __all__ = ["RULES", "main"]
 
@@ -47,7 +49,7 @@ def namespace_argument(text: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = OneLineArgumentParser(prog="python -m clnn_ros.check_env_node",
+    parser = OneLineArgumentParser(prog="python -m clnn_ros.live.check_env",
                                    name="check_env_node", description=__doc__.split("\n\n")[0])
     parser.add_argument("--domain-id", type=int, default=150 + os.getpid() % 80,
                         help="private ROS_DOMAIN_ID for the check (default: 150 + pid %% 80)")
@@ -83,8 +85,8 @@ def main(argv: list[str] | None = None) -> int:
               f"{args.namespace}, max_steps {MAX_STEPS}, {physics_summary(CHECKED_RUN)})",
               flush=True)
         # after the arguments: --help and a usage error need no ROS
-        from .check_env.probe import Probe
-        from .check_env.scenario import run_checks
+        from ..check_env.probe import Probe
+        from ..check_env.scenario import run_checks
         findings = run_checks(Probe(args.command, args.namespace, args.domain_id,
                                     args.startup_timeout, params_file, env),
                               strict_physics=args.physics_from_run)

@@ -1,4 +1,5 @@
-"""What the analysis reads of a bag (clnn_ros.analyze): the run's parameters from its metadata
+"""What the analysis reads of a bag (clnn_ros.analysis.analyze): the run's parameters from its
+metadata
 record, run_all's notes in metadata.yaml (how far the run went), its trial events and weight
 snapshots, each per-tick topic's ticks (each message's tick) and the raw states, spikes, rewards
 and actions, and one trial's series."""
@@ -10,13 +11,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .bag import (Decoder, begins_with_a_stamp, iter_raw, mcap_file, metadata_notes, open_bag,
+from ..bag import (Decoder, begins_with_a_stamp, iter_raw, mcap_file, metadata_notes, open_bag,
                   tick_of)
-from .core.params import ParamError, Params, params_from_strings
-from .graph.fields import END, FAILURE_REASONS, REACHED_MAX_STEPS, START, tick_nanoseconds
-from .graph.names import (ACTION, INPUT_LABELS, PER_TICK, REWARD, SPIKES, STATE, TOPIC_TYPES,
+from ..core.params import ParamError, Params, params_from_strings
+from ..graph.fields import END, FAILURE_REASONS, REACHED_MAX_STEPS, START, tick_nanoseconds
+from ..graph.names import (ACTION, INPUT_LABELS, PER_TICK, REWARD, SPIKES, STATE, TOPIC_TYPES,
                           TRIAL_EVENT, WEIGHTS)
-from .graph.run import RUN_SETTINGS
+from ..graph.run import RUN_SETTINGS
 
 REINFORCEMENT = {(1, 0): 1, (0, 1): -1}  # by Reward.reward_one_hot; none (0, 0) is 0
 
@@ -141,7 +142,7 @@ def input_labels(data, inputs: int | None = None) -> list[str]:
 def trial_series(data, trial: int):
     """The ticks of `trial` that have a state in the bag, with their spikes, actions and
     reinforcement (a TrialSeries), or None if the bag holds no state of it."""
-    from .analysis_figures import TrialSeries
+    from .figures import TrialSeries
     raw, decode, schemas = data["raw"], data["decode"], data["schemas"]
     start, end = trial_window(data["events"], trial)
     if start is None:  # an END without its START (the default trial is taken from the ENDs)

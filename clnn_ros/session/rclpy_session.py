@@ -20,9 +20,9 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 
-from .core.params import ParamError
-from .graph import qos
-from .graph.run import read_params_file
+from ..core.params import ParamError
+from ..graph import qos
+from ..graph.run import read_params_file
 from .process_signals import catch_signals
 
 

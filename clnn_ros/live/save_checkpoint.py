@@ -2,7 +2,7 @@
 `ros2 service call /agent/save_checkpoint std_srvs/srv/Trigger` (--namespace NAME: the graph
 of `run_all --namespace NAME`, /NAME/agent/save_checkpoint).
 
-    python -m clnn_ros.save_checkpoint       # prints <out_dir>/checkpoint_<tick>.npz
+    python -m clnn_ros.live.save_checkpoint       # prints <out_dir>/checkpoint_<tick>.npz
 
 The agent saves its state after the last tick it completed; `run_all --init-weights FILE` resumes
 from it. Exit status 0 saved, 1 the agent refused (the reason is printed), 2 no agent answered
@@ -14,17 +14,17 @@ from __future__ import annotations
 import sys
 import time
 
-from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
+from ..session import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
 
 import rclpy
 from std_srvs.srv import Trigger
 
-from .cli import OneLineArgumentParser
-from .rclpy_session import ros_session
+from ..cli import OneLineArgumentParser
+from ..session.rclpy_session import ros_session
 
 
 def main(argv=None) -> int:
-    parser = OneLineArgumentParser(prog="python -m clnn_ros.save_checkpoint",
+    parser = OneLineArgumentParser(prog="python -m clnn_ros.live.save_checkpoint",
                                    name="save_checkpoint",
                                    description=__doc__.split("\n\n")[0])
     parser.add_argument("--wait", type=float, default=10.0,

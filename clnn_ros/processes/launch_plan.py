@@ -19,11 +19,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from .core.params import ParamError
-from .files import cannot_create
-from .graph.names import (GRAPH_NODES, NOT_STARTED, RECORDER, TRIAL_MANAGER, clock_remappings,
+from ..core.params import ParamError
+from ..files import cannot_create
+from ..graph.names import (GRAPH_NODES, NOT_STARTED, RECORDER, TRIAL_MANAGER, clock_remappings,
                           namespace_problem)
-from .graph.run import DEMO, ENVIRONMENTS, RUN_SETTINGS, default_bag_path, run_values, write_params
+from ..graph.run import DEMO, ENVIRONMENTS, RUN_SETTINGS, default_bag_path, run_values, write_params
 from .supervise import RECORDER_GRACE_S, SHUTDOWN_GRACE_S, exit_description, unfinished_bag
 
 # launch argument: description; an empty value leaves it out. RUN_VALUES are run values.
@@ -111,7 +111,8 @@ class Step:
 
 
 class Supervision:
-    """The launched graph's processes, watched as run_all watches them (clnn_ros.supervise).
+    """The launched graph's processes, watched as run_all watches them
+    (clnn_ros.processes.supervise).
     `exited` is told each exit that happens while the launch is not shutting down (on the
     launch's own shutdown, Ctrl-C or a failure, every node is asked to stop: its exit is
     expected, whatever its status).

@@ -1,6 +1,6 @@
 """Offline analysis of a recorded run, from the bag alone (no ROS graph, no live results).
 
-    python -m clnn_ros.analyze BAG [--out DIR] [--trial N] [--animate N] [--salvage]
+    python -m clnn_ros.analysis BAG [--out DIR] [--trial N] [--animate N] [--salvage]
 
 BAG: a bag directory (as run_all records it: DIR/metadata.yaml, DIR/DIR_0.mcap) or its .mcap file.
 Writes into DIR (default: <bag>_analysis, beside the bag directory or the .mcap file):
@@ -41,13 +41,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .analysis_data import input_labels, read_bag, trial_rows, trial_series
-from .analysis_summary import summary_markdown
-from .bag import METADATA_FILE, BagError
-from .cli import OneLineArgumentParser
-from .files import cannot_create, describe_write_error
-from .graph.fields import EPISODE_END, START, trials_csv
-from .graph.names import SPIKES
+from .data import input_labels, read_bag, trial_rows, trial_series
+from .summary import summary_markdown
+from ..bag import METADATA_FILE, BagError
+from ..cli import OneLineArgumentParser
+from ..files import cannot_create, describe_write_error
+from ..graph.fields import EPISODE_END, START, trials_csv
+from ..graph.names import SPIKES
 
 
 class UsageError(Exception):
@@ -120,7 +120,7 @@ def analyze(bag_path: Path, out: Path, trial: int | None, salvage: bool,
 def write_results(result: dict, trial: int | None, animate: int | None, folder: Path,
                   progress) -> None:
     """Every result but summary.md into `folder`; `result` gains what they hold."""
-    from . import analysis_figures as pictures
+    from . import figures as pictures
     data, rows, produced = result["data"], result["rows"], result["produced"]
     params = data["params"]
     (folder / "trials.csv").write_text(trials_csv(rows))
@@ -211,7 +211,7 @@ def default_out(bag_path: Path) -> Path:
 
 
 def main(argv=None) -> int:
-    parser = OneLineArgumentParser(prog="python -m clnn_ros.analyze", name="analyze",
+    parser = OneLineArgumentParser(prog="python -m clnn_ros.analysis", name="analyze",
                                    description=__doc__.split("\n\n")[0])
     parser.add_argument("bag", type=Path, help="a bag directory recorded by run_all (or its "
                         ".mcap file)")

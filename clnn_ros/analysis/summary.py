@@ -1,4 +1,4 @@
-"""summary.md of an analysis (clnn_ros.analyze): what the bag holds and what the run did
+"""summary.md of an analysis (clnn_ros.analysis.analyze): what the bag holds and what the run did
 (environment, physics, encoding), the trials, and what each picture shows."""
 
 from __future__ import annotations
@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .analysis_data import gaps, input_labels
-from .graph.names import PER_TICK, TOPIC_TYPES, absolute
-from .graph.ticks import RUN_END_NOTE, RUN_LAST_TICK_NOTE
+from .data import gaps, input_labels
+from ..graph.names import PER_TICK, TOPIC_TYPES, absolute
+from ..graph.ticks import RUN_END_NOTE, RUN_LAST_TICK_NOTE
 
 # What each picture shows, for summary.md ({trial}: the chosen trial; trial_N.gif: ANIMATION).
 PICTURES = {
@@ -118,7 +118,7 @@ def summary_markdown(bag_path: Path, result: dict, salvage: bool) -> str:
     reason, run_last, source = run_end(end, data["notes"])
     inputs = result["final"].shape[2] if result["final"] is not None else params.n_inputs
     lines = [f"# Analysis of `{bag_path.name}`", "",
-             "Rebuilt from the bag alone by `python -m clnn_ros.analyze`"
+             "Rebuilt from the bag alone by `python -m clnn_ros.analysis`"
              + (" (salvaged: the file was not finished, only its complete chunks)" if salvage
                 else "") + ".", "",
              "## Run", "",

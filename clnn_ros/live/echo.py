@@ -1,12 +1,13 @@
 """Print the live messages of a topic as `ros2 topic echo` does (no ROS CLI is needed: rclpy
 only). Run it against a graph started in another terminal (same ROS_DOMAIN_ID).
 
-    python -m clnn_ros.echo /cartpole/state
-    python -m clnn_ros.echo /rln/action --once
-    python -m clnn_ros.echo /cartpole/state --field pole_angle_deg
-    python -m clnn_ros.echo /rln/spikes --flow-style    # {tick: 12, trial: 0, spikes: [0, 1]}
-    python -m clnn_ros.echo /cartpole/state --csv       # one line per message, for plotting
-    python -m clnn_ros.echo /rln/spikes --raster        # one row per tick: tick 12 trial 0 |..#.|
+    python -m clnn_ros.live.echo /cartpole/state
+    python -m clnn_ros.live.echo /rln/action --once
+    python -m clnn_ros.live.echo /cartpole/state --field pole_angle_deg
+    python -m clnn_ros.live.echo /rln/spikes --flow-style    # {tick: 12, trial: 0, spikes: [0, 1]}
+    python -m clnn_ros.live.echo /cartpole/state --csv       # one line per message, for plotting
+    python -m clnn_ros.live.echo /rln/spikes --raster        # one row per tick: tick 12 trial 0
+    |..#.|
 
 As ros2topic's echo (rosidl_runtime_py's message_to_yaml and message_to_csv): YAML in block
 style, fields in declaration order, `---` after each message, `{}` for a message without fields;
@@ -22,14 +23,14 @@ import array
 import sys
 import time
 
-from . import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
+from ..session import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
 
 import yaml
 
-from .bag import message_class
-from .cli import OneLineArgumentParser
-from .graph import qos
-from .graph.names import INPUT_LABELS, SPIKES, TOPIC_TYPES, absolute, graph_topic
+from ..bag import message_class
+from ..cli import OneLineArgumentParser
+from ..graph import qos
+from ..graph.names import INPUT_LABELS, SPIKES, TOPIC_TYPES, absolute, graph_topic
 
 
 class EchoError(Exception):
@@ -131,7 +132,7 @@ def topic_type(node, topic: str, wait_s: float) -> str:
 
 
 def main(argv=None) -> int:
-    parser = OneLineArgumentParser(prog="python -m clnn_ros.echo", name="echo",
+    parser = OneLineArgumentParser(prog="python -m clnn_ros.live.echo", name="echo",
                                    description=__doc__.split("\n\n")[0])
     parser.add_argument("topic")
     parser.add_argument("--once", action="store_true", help="print one message and exit")
@@ -149,7 +150,7 @@ def main(argv=None) -> int:
     if args.raster and args.field:
         parser.error("--raster prints whole SpikeVectors: not with --field")
     import rclpy  # after the arguments: --help and a usage error need no ROS
-    from .rclpy_session import qos_profile, ros_session
+    from ..session.rclpy_session import qos_profile, ros_session
     with ros_session() as received:
         node = rclpy.create_node("echo", start_parameter_services=False, enable_rosout=False)
         try:

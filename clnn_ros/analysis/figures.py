@@ -1,4 +1,4 @@
-"""The pictures of `python -m clnn_ros.analyze`, drawn from what a bag holds (matplotlib, Agg).
+"""The pictures of `python -m clnn_ros.analysis`, drawn from what a bag holds (matplotlib, Agg).
 
 Each *_figure function takes arrays and returns its Figure (the tests inspect them); save() writes
 one as PNG, animate_trial() writes a GIF. The paper's figures are clnn_ros.figures' (reproduce);
@@ -14,8 +14,8 @@ from typing import Callable
 
 import numpy as np
 
-from .figures import END_COLORS, END_LABELS, _save as save, plt
-from .graph.fields import END_REASONS
+from ..figures import END_COLORS, END_LABELS, _save as save, plt
+from ..graph.fields import END_REASONS
 
 WINDOW_TICKS = 200     # a raster window: at this width every tick stays a visible column
 OVERVIEW_BINS = 400    # a whole trial in at most this many columns (a 10,000-tick one too)
