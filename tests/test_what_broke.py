@@ -301,6 +301,38 @@ def test_claims_order_two_graphs_alike_on_both_sides():
     assert claim_order("-1 x") is None and claim_order("١٠ x") is None
 
 
+def test_lockstep_traffic_before_the_first_tick_is_another_graphs_and_the_graph_gives_way(
+        ros_env, tmp_path):
+    """A graph's own nodes send nothing before its first clock, so a lockstep message before it
+    is another graph's (f11 of the issue-35 streak: under a flood, at load 20, a newcomer's
+    claim came too late and it neither started nor gave way for 180 s). Held before its start
+    (its environment node is someone else's, never started), the graph gives way at the first
+    such message: exit 1, one line naming the topic, no bag."""
+    process = start(ros_env, tmp_path, "--env", "external", "--stall-timeout", str(HANG_S))
+    forger = None
+    try:
+        wait_for_line(process.stdout, "run_all: waiting for an environment node",
+                      errors=process.stderr)
+        forger = subprocess.Popen([sys.executable, "-c", FORGER, str(HANG_S)], env=ros_env,
+                                  stderr=subprocess.PIPE, text=True)
+        _, stderr = process.communicate(timeout=HANG_S)
+    finally:
+        if forger is not None:
+            forger.send_signal(signal.SIGINT)
+            forger.communicate(timeout=60)
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGINT)
+            process.communicate(timeout=HANG_S)
+    domain = ros_env["ROS_DOMAIN_ID"]
+    assert process.returncode == 1, stderr[-3000:]
+    assert problem_lines(stderr) == [
+        f"run_all: error: another graph runs in namespace / on ROS domain {domain}: its "
+        f"rln/spikes came before this graph's first tick (give each graph its own --namespace "
+        f"or ROS_DOMAIN_ID)"], stderr
+    assert not (tmp_path / "bag").exists()
+    assert not processes_with(str(tmp_path))
+
+
 def test_of_two_graphs_the_later_gives_way_however_late_they_meet(ros_env, tmp_path):
     """No second graph's nodes in sight, only claims (graph.watch.graph_claim), long after the
     start: a claim from a graph that started later is named and the run goes on; one from a
@@ -351,7 +383,7 @@ def test_of_two_graphs_started_at_once_one_gives_way_and_the_other_is_never_wron
     gave_way = [name for name, (_, stderr) in ended.items() if problem_lines(stderr)[-1:] and
                 problem_lines(stderr)[-1].startswith(
                     f"run_all: error: another graph runs in namespace / on ROS domain {domain}")]
-    assert len(gave_way) == 1, {name: stderr[-2000:] for name, (_, stderr) in ended.items()}
+    assert len(gave_way) == 1, {name: problem_lines(stderr) for name, (_, stderr) in ended.items()}
     (other,) = set(seeds) - set(gave_way)
     stdout, stderr = ended[other]
     assert runs[gave_way[0]].returncode == 1

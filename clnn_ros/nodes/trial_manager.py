@@ -14,11 +14,11 @@ What ends an episode early, with exit status 1 and the node to blame:
   message for the tick is missing;
 * a node of `external_nodes` that leaves the ROS graph (the nodes run_all or launch started
   are theirs to watch: they see the process exit; a paused one that drops out is alive);
-* another graph of the same names in the namespace and domain that started first (GraphClaim),
-  or names two nodes carry for `stall_timeout_s` before the first tick: exit status
-  NOT_STARTED, the run is abandoned, with no EPISODE_END (the other's nodes would obey it); a
-  node of `external_nodes` that does not appear within `stall_timeout_s` once the rest is up
-  (the others are waited for as long as they take);
+* another graph of the same names in the namespace and domain (its claim, GraphClaim; its
+  lockstep traffic before this graph's first tick; names two nodes carry for `stall_timeout_s`):
+  NOT_STARTED, the run abandoned with no EPISODE_END (the other's nodes would obey it); a node
+  of `external_nodes` not there within `stall_timeout_s` once the rest is up (the others are
+  waited for as long as they take);
 * a foreign publisher on a graph topic (graph.watch), unless allow_foreign_publishers: then
   the run goes on and ends "tainted", exit status 1, never "completed".
 With a recorder it keeps the clock at most RECORDER_WINDOW ticks ahead of the recorder's
@@ -53,8 +53,7 @@ from ..graph.run import NODE_PARAMETERS, names_list
 from ..graph.watch import another_graph, describe_foreign, foreign_publishers, gone, named_twice
 from ..core.init_weights import episode_start
 from .glue import (LOCKSTEP_QOS, PROGRESS_QOS, READY_QOS, GraphClaim, Pace, Readiness, checked,
-                   declare_run_parameters, endpoints_matched, run_node,
-                   steady_clock, use_sim_time)
+                   declare_run_parameters, endpoints_matched, run_node, steady_clock, use_sim_time)
 
 WATCHDOG_S = 0.1
 GRAPH_CHECK_S = 0.5  # how often the ROS graph is looked at once running (before: every check)
@@ -104,14 +103,12 @@ class TrialManagerNode(Node):
             LOCKSTEP_QOS)
             for msg_type, topic in ((CartPoleState, STATE), (SpikeVector, SPIKES),
                                     (Reward, REWARD), (Action, ACTION))]
-        inputs.append(self.create_subscription(
-            WeightSnapshot, WEIGHTS, checked(WEIGHTS, self.params, self.refusals,
-                                             self.on_weights), LOCKSTEP_QOS))
+        inputs.append(self.create_subscription(WeightSnapshot, WEIGHTS, checked(
+            WEIGHTS, self.params, self.refusals, self.on_weights), LOCKSTEP_QOS))
         # the clock goes to the environment; trial events to the four other nodes
         self.matched = endpoints_matched(self.settings["extra_nodes"],
                                          [(self.clock_pub, 1), (self.event_pub, 4)], inputs)
         self.create_subscription(String, READY, lambda msg: self.ready.add(msg.data), READY_QOS)
-        # announced like every node's (a tool watching the graph start sees who is up)
         self.readiness = Readiness(self, self.matched, is_running=lambda: self.join.tick > 0)
         self.claim = GraphClaim(self, self.on_other_graph)
         self.pace = Pace(self, self.settings["rate_hz"], self.publish_tick)
@@ -127,8 +124,9 @@ class TrialManagerNode(Node):
         """State and action make the tick (TickJoin); spikes and reward, watched for the blame,
         come in order, one per tick (each may come after the action); before the start, none."""
         def receive(msg) -> None:
-            if self.started_at is None:
-                self.refusals.refuse(topic, msg, "this graph has not started")
+            if self.started_at is None:  # its nodes wait for its first clock: another graph's
+                self.stop(NOT_STARTED, another_graph(self.get_namespace(), f"its {topic} came "
+                                                     f"before this graph's first tick"))
             elif (self.join.offer(topic, msg) if topic in (STATE, ACTION) else
                   msg.tick == self.current[topic] + 1 <= self.join.tick):
                 self.current[topic] = msg.tick
@@ -244,23 +242,25 @@ class TrialManagerNode(Node):
             self.recorded_tick = max(self.recorded_tick, self.join.tick)  # its progress comes
 
     def check_start(self, now: float, running: float) -> None:
-        # Shared names: another graph's (the claims decide who gives way) or strays' (bounded).
-        self.shared_since = self.shared_since + running if self.shared_names else 0.0
+        # Shared names are strays' (bounded) unless another trial manager is here: then its claim
+        # decides who gives way (counted meanwhile, both of two graphs once gave way).
+        contested = self.claim.contested()
+        shared = self.shared_names and not contested
+        self.shared_since = self.shared_since + running if shared else 0.0
         if self.shared_since > self.settings["stall_timeout_s"]:
             self.stop(NOT_STARTED, another_graph(self.get_namespace(), "two nodes named "
                                                  f"{', '.join(self.shared_names)}"))
             return
-        if self.shared_names or self.claim.contested():  # whose announcement? (nodes repeat)
+        if self.shared_names or contested:  # whose announcement? (nodes repeat)
             self.ready.clear()
         missing = self.expected - self.ready
-        if not (missing or self.shared_names) and self.matched() and not self.claim.contested():
+        if not (missing or self.shared_names or contested) and self.matched():
             self.started_at = now
             self.advance(0, starts_trial=True)
             return
         absent = (self.external_nodes & missing) - self.in_graph
         if absent and (self.expected - self.external_nodes) <= self.in_graph:
-            # Everything run_all started is up (some wait for the absent node to be ready):
-            # the nodes started by someone else get the stall timeout to appear.
+            # All run_all started is up: the nodes started by someone else get the stall timeout
             self.externals_awaited_since = (self.externals_awaited_since or 0.0) + running
             if self.externals_awaited_since > self.settings["stall_timeout_s"]:
                 self.stop(1, f"no {', '.join(sorted(absent))} node appeared in namespace "
