@@ -45,10 +45,14 @@ def angle_grid(p: Params) -> np.ndarray:
     return -p.angle_span_deg + 2 * p.angle_span_deg * k / (p.n_angles - 1)
 
 
-def seed_setup(seed: int, p: Params) -> tuple[np.ndarray, np.ndarray]:
-    """(initial weights, initial angles of every trial) for a seed."""
+def check_seed(seed) -> None:
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+
+
+def seed_setup(seed: int, p: Params) -> tuple[np.ndarray, np.ndarray]:
+    """(initial weights, initial angles of every trial) for a seed."""
+    check_seed(seed)
     rng = np.random.default_rng(seed)
     weights = p.w_base + rng.uniform(0, p.w_range, size=(2, p.n_segments, p.n_inputs))
     grid = angle_grid(p)
@@ -67,7 +71,7 @@ def trial_starts(seed: int, p: Params, angles: np.ndarray | None = None) -> tupl
     in radians: the paper's protocol (or `angles`, deg): at rest at the seed's initial angles;
     gymnasium's: the successive starts of CartPole-v1's reset() (module docstring)."""
     if angles is None and p.protocol == "gymnasium":
-        seed_setup(seed, p)  # the seed's check
+        check_seed(seed)
         return gymnasium_starts(seed, p.trials), True
     angles = seed_setup(seed, p)[1] if angles is None else np.asarray(angles, dtype=np.float64)
     return np.array([at_rest(a) for a in angles], dtype=np.float64).reshape(-1, 4), False

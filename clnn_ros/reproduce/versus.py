@@ -26,7 +26,7 @@ from ..core.episode import returns as episode_returns, run_episode
 from ..core.params import Params, params_from_strings
 from ..core.presets import preset_values
 from ..core.solving import SOLVED_MEAN, WINDOW, solved_episode
-from .common import md_table, progress, store_path, stored, write_csv
+from .common import load_stored, md_table, progress, store_arrays, store_path, write_csv
 from .gym_eval import GYM_ID, FrozenPolicy, frozen, play, reset_seed
 
 AGENTS = {
@@ -117,7 +117,7 @@ def run_versus(agents: list[str], seeds: list[int], store: Path, workers: int) -
         for seed in (seeds[:MUJOCO_SEEDS] if agent == "rln_mujoco" else seeds):
             path = store_path(store / agent, f"seed_{seed}", [key, seed])
             if path.exists():
-                results[agent][seed] = stored(path, None)
+                results[agent][seed] = load_stored(path)
             else:
                 pending.append((agent, seed, path))
     rln_pending = [(seed, path) for agent, seed, path in pending if agent == "rln"]
@@ -130,9 +130,10 @@ def run_versus(agents: list[str], seeds: list[int], store: Path, workers: int) -
         for k, (seed, path) in enumerate(progress(rln_pending, "rln frozen play")):
             policy = FrozenPolicy(frozen(p), batch.final_weights[k], seed)
             returns = episode_returns(batch.steps[k], batch.end_status[k])
-            results["rln"][seed] = stored(path, lambda: dict(
-                returns=returns, env_steps=np.cumsum(returns), cpu_s=np.float64(cpu_s),
-                play=frozen_play(policy.action, seed)))
+            results["rln"][seed] = dict(returns=returns, env_steps=np.cumsum(returns),
+                                        cpu_s=np.float64(cpu_s),
+                                        play=frozen_play(policy.action, seed))
+            store_arrays(path, results["rln"][seed])
     others = [job for job in pending if job[0] != "rln"]
     if others:
         with concurrent.futures.ProcessPoolExecutor(
@@ -142,8 +143,8 @@ def run_versus(agents: list[str], seeds: list[int], store: Path, workers: int) -
             done = concurrent.futures.as_completed(futures)
             for future in progress(done, f"versus: {len(others)} agent-seeds"):
                 agent, seed, path = futures[future]
-                arrays = future.result()
-                results[agent][seed] = stored(path, lambda: arrays)
+                results[agent][seed] = future.result()
+                store_arrays(path, results[agent][seed])
     return results
 
 
