@@ -13,7 +13,7 @@ classes, measured through their public attributes, so that the nodes themselves 
 TickJoin holds state(t) and action(t) (its join's completion, before on_tick), written as
 {"published": [ns...], "completed": [ns...]} (time.perf_counter_ns) at the end.
 --profile: cProfile into F. A node process: with a CPU-time timer, from its first lockstep
-publication to its end. Composed: with the wall clock, from the trial manager's publish_clock(0)
+publication to its end. Composed: with the wall clock, from the trial manager's advance(0)
 to its stop().
 """
 
@@ -145,18 +145,18 @@ def profile_composed(manager, profile_file: Path) -> None:
     """Profile from the trial manager's first clock to its stop (the episode, not the start-up
     and discovery before it nor the teardown after it)."""
     profile = cProfile.Profile()
-    publish_clock, stop = manager.publish_clock, manager.stop
+    advance, stop = manager.advance, manager.stop
 
-    def profiled_publish_clock(tick: int) -> None:
+    def profiled_advance(tick: int, starts_trial: bool) -> None:
         if tick == 0:
             profile.enable()
-        publish_clock(tick)
+        advance(tick, starts_trial)
 
     def profiled_stop(*args, **kwargs) -> None:
         profile.disable()
         stop(*args, **kwargs)
         profile.dump_stats(str(profile_file))
-    manager.publish_clock, manager.stop = profiled_publish_clock, profiled_stop
+    manager.advance, manager.stop = profiled_advance, profiled_stop
 
 
 def main(argv: list[str]) -> int:

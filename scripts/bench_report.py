@@ -336,7 +336,7 @@ def report(rows, paced, ser, composed, separate, sizes, quick, elapsed, loads, s
         "(executor, publish): read the shares, not the absolute figures.",
         "",
         f"The composed graph ({c_ticks} ticks, {c_summary['ticks_per_s']:.0f} ticks/s with the "
-        "profiler on; profiled from the trial manager's `publish_clock(0)` to its `stop()`, "
+        "profiler on; profiled from the trial manager's `advance(0)` to its `stop()`, "
         "wall-clock timer: its one thread is busy nearly all the time, the sum is close to "
         "1e6 / ticks/s):",
         "",

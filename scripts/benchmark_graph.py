@@ -51,7 +51,7 @@ the ring's, the benchmark's own).
    case).
 
 Profiles (EventsExecutor, bench_profile.py): the composed graph under cProfile from the trial
-manager's first clock to its stop (bench_node.py wraps its publish_clock and stop), and one
+manager's first clock to its stop (bench_node.py wraps its advance and stop), and one
 5-process run with every node process under cProfile with a CPU-time timer from its first
 lockstep publication to its exit. An attribute that no longer exists fails the benchmark:
 nothing falls back silently to another measurement.

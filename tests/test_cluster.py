@@ -9,10 +9,12 @@ from __future__ import annotations
 import importlib.util
 import ipaddress
 import os
+import shutil
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -197,6 +199,49 @@ def test_bad_parameters_are_refused_before_ray_starts(tmp_path, capsys, monkeypa
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "sigma must be" in err[0], err
     assert not (tmp_path / "o").exists()
+
+
+# A stand-in for `ray start --head --block`: fails as Ray's node.py does when its raylet is slower
+# than its fixed 30 s (its own last line) as long as the file FAILURES counts down, then starts.
+STAND_IN_RAY = """import pathlib, sys, time
+count = pathlib.Path(__file__).parents[2] / "FAILURES"
+left = int(count.read_text())
+if left:
+    count.write_text(str(left - 1))
+    sys.exit("Exception: The current node timed out during startup. This could happen because "
+             "some of the raylet failed to startup or the GCS has become overloaded.")
+print("Ray runtime started.", flush=True)
+time.sleep(600)
+"""
+
+
+@pytest.mark.parametrize("failures, started", [(0, True), (2, True), (None, False)])
+def test_a_local_head_that_ray_gave_up_on_is_started_again(tmp_path, failures, started):
+    """Ray gives up on a head whose raylet registers after 30 s (not configurable): beside CPU
+    hogs a slow start, not a fault, so LocalHead starts it again within its own bound. Any
+    other failure is one line naming the head's logs, at the first try."""
+    from clnn_ros.reproduce.cluster import ClusterError, LocalHead
+    scripts = tmp_path / "ray" / "scripts"
+    scripts.mkdir(parents=True)
+    for package in (tmp_path / "ray", scripts):
+        (package / "__init__.py").write_text("")
+    (scripts / "scripts.py").write_text(STAND_IN_RAY if failures is not None
+                                        else 'raise SystemExit("port 6379 is in use")')
+    (tmp_path / "FAILURES").write_text(str(failures or 0))
+    head = LocalHead(1, {"PYTHONPATH": str(tmp_path)})
+    before = set(Path(tempfile.gettempdir()).glob("clnn_ray_*"))
+    if started:
+        with head:
+            assert head.process.poll() is None
+        assert (tmp_path / "FAILURES").read_text() == "0"
+    else:
+        with pytest.raises(ClusterError) as refused:
+            head.__enter__()
+        message, _, logs = str(refused.value).rstrip(")").partition(" (its logs: ")
+        assert message == "cannot start a local Ray head: port 6379 is in use", refused.value
+        shutil.rmtree(logs)  # kept for the user, who is told where
+    assert head.process is None
+    assert set(Path(tempfile.gettempdir()).glob("clnn_ray_*")) == before
 
 
 @pytest.mark.parametrize("ray_args, status, message", [

@@ -4,8 +4,11 @@ equals the batch engine's on the core's physics, trial by trial and in the final
 
 import csv
 import math
+import os
+import signal
 import subprocess
 import sys
+import time
 
 import gymnasium
 import numpy as np
@@ -20,10 +23,12 @@ from clnn_ros.core.physics import (CONTINUE, FAIL_ANGLE, FAIL_POSITION, CartPole
 from clnn_ros.core.presets import preset_values
 from clnn_ros.core.solving import solved_episode, solving_summary, steps_to_solve
 from clnn_ros.reproduce.__main__ import main as reproduce_main
+from clnn_ros.reproduce.common import load_stored
 
 from conftest import free_domain_id, ros_environment
 
 DOMAIN_ID = free_domain_id()
+HANG_S = 240  # a bound against a hang, never a speed bound
 
 
 @pytest.fixture(scope="module")
@@ -198,6 +203,35 @@ def test_versus_runs_the_agents_alike_and_resumes(tmp_path, capsys):
     table = [line for line in report.splitlines() if line.startswith("| ")]
     assert [line for line in (tmp_path / "VERSUS.md").read_text().splitlines()
             if line.startswith("| ")] == table
+
+
+def test_versus_ctrl_c_ends_at_once_in_one_line_and_keeps_what_was_stored(tmp_path):
+    """Ctrl-C (SIGINT to the terminal's whole process group, workers included): exit 130 with
+    one line, no worker left running, every agent-seed stored before it readable."""
+    stored = tmp_path / "data" / "versus" / "ase_ace"
+    run = subprocess.Popen([sys.executable, "-m", "clnn_ros.reproduce", "versus", "--agents",
+                            "ase_ace", "--seeds", "0-999", "--workers", "2", "--out",
+                            str(tmp_path)], stderr=subprocess.PIPE, text=True,
+                           start_new_session=True)
+    try:
+        deadline = time.monotonic() + HANG_S
+        while len(list(stored.glob("*.npz"))) < 2 and run.poll() is None:
+            assert time.monotonic() < deadline, "no agent-seed stored"
+            time.sleep(0.2)
+        os.killpg(run.pid, signal.SIGINT)
+        _, err = run.communicate(timeout=HANG_S)
+    finally:
+        if run.poll() is None:
+            os.killpg(run.pid, signal.SIGKILL)
+    assert run.returncode == 130, err
+    assert [line for line in err.splitlines() if line.strip()] == ["interrupted"], err
+    kept = list(stored.glob("*.npz"))
+    assert 2 <= len(kept) < 1000
+    assert all(len(load_stored(path)["returns"]) > 0 for path in kept)
+    with pytest.raises(ProcessLookupError):  # the workers too: none of the group is left
+        for _ in range(int(HANG_S / 0.1)):
+            os.killpg(run.pid, 0)
+            time.sleep(0.1)
 
 
 @pytest.mark.parametrize("agents, message", [

@@ -67,6 +67,7 @@ def train(algorithm: str, seed: int) -> TrainingRun:
     from stable_baselines3 import DQN, PPO
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.logger import Logger
 
     torch.set_num_threads(1)
     arguments, n_envs, n_timesteps = model_arguments(zoo_entry(algorithm)[0])
@@ -83,6 +84,8 @@ def train(algorithm: str, seed: int) -> TrainingRun:
     env = make_vec_env(ENV_ID, n_envs=n_envs, seed=seed)
     model = {"ppo": PPO, "dqn": DQN}[algorithm](env=env, seed=seed, device="cpu", verbose=0,
                                                 **arguments)
+    # A logger of no output: the default one makes an empty /tmp/SB3-<time> folder each run.
+    model.set_logger(Logger(folder=None, output_formats=[]))
     began = time.process_time()
     model.learn(total_timesteps=n_timesteps, callback=EpisodeRecorder())
     cpu_s = time.process_time() - began

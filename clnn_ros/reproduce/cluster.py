@@ -52,6 +52,9 @@ LOCAL_ENVIRON = {**LOOPBACK_ENVIRON, "RAY_AUTH_MODE": "token",
 AGENT_PORTS = ("--dashboard-agent-grpc-port", "--dashboard-agent-listen-port",
                "--metrics-export-port", "--runtime-env-agent-port")
 STARTED = "Ray runtime started"  # what `ray start` prints once the node is up
+# What Ray's node.py raises when its raylet has not registered within a fixed 30 s
+# (raylet_start_wait_time_s, not configurable): a slow start on a loaded machine, not a fault.
+RAY_STARTUP_TIMED_OUT = "The current node timed out during startup"
 
 
 class ClusterError(RuntimeError):
@@ -178,13 +181,20 @@ def end_processes(pids: list[int]) -> None:
             pass
 
 
+def worth_restarting(failure: str, time_left_s: float) -> bool:
+    """Whether a local head that failed with this last log line is started again: only when Ray
+    gave up on a deadline of its own (RAY_STARTUP_TIMED_OUT) and START_S still allows."""
+    return RAY_STARTUP_TIMED_OUT in failure and time_left_s > 0
+
+
 class LocalHead:
     """A Ray head of this machine's own, as a context: `ray start --head --block` on 127.0.0.1
     (Ray takes the loopback address as the node's when it is not to form a cluster: the switch
     its macOS and Windows builds use), `cpus` CPUs, fixed agent ports (AGENT_PORTS), a token of
     its own (no file in ~/.ray; nobody else can join) and a temporary folder of its own. Leaving
     stops it (SIGTERM: Ray ends its processes; any left after STOP_S are killed by their ids);
-    it also ends when this process does. `environ`: what a driver needs to join it."""
+    it also ends when this process does. A start that Ray gave up on by its own fixed deadline is
+    made again while START_S allows (worth_restarting). `environ`: what a driver needs to join it."""
 
     def __init__(self, cpus: int, extra_environ: dict | None = None):
         self.cpus, self.extra = cpus, extra_environ or {}
@@ -194,6 +204,21 @@ class LocalHead:
         self.temp_dir = None
 
     def __enter__(self) -> "LocalHead":
+        deadline = time.monotonic() + START_S
+        try:
+            while (failure := self._start(deadline)) is not None:
+                if not worth_restarting(failure, deadline - time.monotonic()):
+                    logs, self.temp_dir = self.temp_dir, None  # kept: what went wrong is there
+                    raise ClusterError(f"cannot start a local Ray head: {failure} "
+                                       f"(its logs: {logs})")
+                self.__exit__(None, None, None)
+        except BaseException:
+            self.__exit__(None, None, None)
+            raise
+        return self
+
+    def _start(self, deadline: float) -> str | None:
+        """Starts the head and waits until it is up (None) or has failed: its last log line."""
         self.temp_dir = tempfile.mkdtemp(prefix="clnn_ray_")  # short: Ray's socket paths
         gcs, *agents = free_ports(1 + len(AGENT_PORTS))
         self.address = f"127.0.0.1:{gcs}"
@@ -208,25 +233,14 @@ class LocalHead:
                 env={**os.environ, **self.extra, **self.environ}, stdin=subprocess.DEVNULL,
                 stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
                 preexec_fn=end_with_parent)
-        try:
-            self._wait_started(log)
-        except BaseException:
-            self.__exit__(None, None, None)
-            raise
-        return self
-
-    def _wait_started(self, log: str) -> None:
-        deadline = time.monotonic() + START_S
         while True:
             with open(log, errors="replace") as f:
                 text = f.read()
             if STARTED in text:
-                return
+                return None
             if self.process.poll() is not None or time.monotonic() > deadline:
                 lines = [line.strip() for line in text.splitlines() if line.strip()]
-                logs, self.temp_dir = self.temp_dir, None  # kept: what went wrong is in there
-                raise ClusterError(f"cannot start a local Ray head: "
-                                   f"{(lines or ['no output'])[-1][:300]} (its logs: {logs})")
+                return (lines or ["no output"])[-1][:300]
             time.sleep(0.1)
 
     def __exit__(self, *exc) -> None:
