@@ -112,3 +112,15 @@ def test_a_stock_ros_process_receives_the_spikes(ros_env, tmp_path, stock_range)
     assert len(ticks) == 300, (run.stdout, run.stderr[-3000:])
     assert ticks == sorted(set(ticks)), ticks  # each tick once, in order
     assert run.returncode == 130, (tmp_path / "run_all.err").read_text()[-3000:]
+
+
+def test_the_participant_lease_the_trial_manager_waits_for_is_the_profiles():
+    """GraphClaim.patience waits a lease for another graph's nodes to leave: the profiles'."""
+    import xml.etree.ElementTree as ElementTree
+
+    from clnn_ros.session.rosenv import LOOPBACK_PROFILE, PARTICIPANT_LEASE_S, SUBNET_PROFILE
+    for profile in (LOOPBACK_PROFILE, SUBNET_PROFILE):
+        leases = [float(element.findtext("{*}sec")) for element in
+                  ElementTree.parse(profile).iter("{http://www.eprosima.com/XMLSchemas/"
+                                                  "fastRTPS_Profiles}leaseDuration")]
+        assert leases == [PARTICIPANT_LEASE_S], profile

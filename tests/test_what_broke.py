@@ -28,6 +28,7 @@ from clnn_ros.session import rosenv
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
 from clnn_ros.graph.names import PER_TICK, STATE
+from clnn_ros.graph.run import RUN_SETTINGS
 from clnn_ros.graph.ticks import TICKS_RECORD, TickRanges
 from clnn_ros.graph.watch import claim_order, graph_claim
 
@@ -272,6 +273,7 @@ def test_a_second_node_of_a_graph_name_mid_run_is_named(ros_env, tmp_path):
     assert not processes_with(str(tmp_path))
 
 
+GATED_ENVIRONMENT = Path(__file__).with_name("gated_environment.py")
 CLAIMER = """
 import sys, rclpy
 from std_msgs.msg import String
@@ -291,6 +293,71 @@ with ros_session(sys.argv) as signals:
 def claimer(env, claim: str) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-c", CLAIMER, claim], env=env,
                             stderr=subprocess.DEVNULL)
+
+
+LEAVING = """
+import sys, time, rclpy
+from std_msgs.msg import String
+from clnn_ros.nodes.glue import CLAIM_QOS
+from clnn_ros.session.rclpy_session import ros_session
+from clnn_ros.graph.names import CLAIM
+# A graph that gave way and leaves slowly: its trial manager (a later claim) leaves once the
+# other trial manager holds its claim; its node named agent stays argv[2] s more.
+with ros_session(sys.argv) as signals:
+    manager, agent = rclpy.create_node("trial_manager"), rclpy.create_node("agent")
+    heard = []
+    manager.create_subscription(String, CLAIM, heard.append, CLAIM_QOS)
+    claim = manager.create_publisher(String, CLAIM, CLAIM_QOS)
+    claim.publish(String(data=sys.argv[1]))
+    print("up", flush=True)
+    while not signals and (len(heard) < 2 or claim.get_subscription_count() < 2):
+        rclpy.spin_once(manager, timeout_sec=0.1)
+    claim.wait_for_all_acked()
+    manager.destroy_node()
+    print("its trial manager left", flush=True)
+    end = time.monotonic() + float(sys.argv[2])
+    while not signals and time.monotonic() < end:
+        rclpy.spin_once(agent, timeout_sec=0.1)
+    agent.destroy_node()
+"""
+
+
+@pytest.mark.parametrize("killed", [False, True], ids=["leaves", "killed"])
+def test_the_nodes_of_a_graph_that_gave_way_are_waited_for_as_they_leave(ros_env, tmp_path,
+                                                                          killed):
+    """Of two graphs started together, the later gives way and its nodes leave: beside CPU hogs
+    5 s and more after its trial manager (4 in 45 tries, when both graphs gave way: the other
+    took the leaving names for strays'). The graph that goes on, held before its start until the
+    other's trial manager has left (its environment node gated), waits for them (`leaves`: its
+    agent stays twice the stall timeout); a node killed stays in the ROS graph until its DDS
+    lease ends (180 s): the graph starts beside it after LEAVING_S more, says so, and completes
+    equal to the core, untainted."""
+    linger_s = 2 * RUN_SETTINGS["stall_timeout_s"]
+    leaving = subprocess.Popen(
+        [sys.executable, "-c", LEAVING, graph_claim(time.time_ns() + 10**12, "later"),
+         str(linger_s)], env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+        text=True)
+    go = tmp_path / "go"
+    try:
+        wait_for_line(leaving.stdout, "up")
+        process = start(ros_env, tmp_path / "out", "--env-node",
+                        f"{sys.executable} {GATED_ENVIRONMENT} {go}")
+        wait_for_line(leaving.stdout, "its trial manager left", timeout=HANG_S)
+        if killed:
+            leaving.kill()  # no goodbye: its agent stays until its lease ends
+        go.touch()
+        stdout, stderr = process.communicate(timeout=HANG_S)
+    finally:
+        go.touch()
+        leaving.kill()
+        leaving.communicate()
+    assert process.returncode == 0 and "completed" in stdout, stderr[-3000:]
+    assert problem_lines(stderr) == [], stderr[-3000:]
+    assert "a second graph started in namespace / at tick 0: it gives way" in stderr
+    assert ("[trial_manager]: starting beside agent of the graph that gave way" in stderr) == \
+        killed, stderr[-3000:]
+    assert steps_of(tmp_path / "out") == core_steps(TRIALS)
+    assert not processes_with(str(tmp_path))
 
 
 def test_claims_order_two_graphs_alike_on_both_sides():

@@ -29,8 +29,12 @@ from ..graph.run import (DESCRIPTIONS, declared_values, node_parameters, read_pa
 from ..graph.watch import claim_order, graph_claim
 from ..session.rclpy_session import (qos_profile, ros_session, spin_until_finished,
                                       split_ros_arguments)
+from ..session.rosenv import PARTICIPANT_LEASE_S
 
 LOCKSTEP_QOS = qos_profile(qos.LOCKSTEP)
+# For a graph that gave way to end its nodes: its run_all kills one that has not ended within
+# supervise.TERMINATE_S (5 s) of SIGTERM; more on a loaded machine.
+LEAVING_S = 20.0
 READY_QOS = qos_profile(qos.READY)
 CLAIM_QOS = qos_profile(qos.CLAIM)
 PROGRESS_QOS = qos_profile(qos.PROGRESS)
@@ -203,6 +207,7 @@ class GraphClaim:
     def __init__(self, node: Node, on_other: Callable[[bool], None]):
         self.claim = graph_claim(time.time_ns(), secrets.token_hex(8))
         self.on_other, self._others, self._log = on_other, set(), node.get_logger()
+        self.met_another = False  # another graph's trial manager was here (contested, or heard)
         self._publisher = node.create_publisher(String, CLAIM, CLAIM_QOS)
         self._publisher.publish(String(data=self.claim))
         self._subscription = node.create_subscription(String, CLAIM, self._receive, CLAIM_QOS)
@@ -214,7 +219,9 @@ class GraphClaim:
         graph that started meanwhile ran mixed with it; and of two graphs started together, the
         one that goes on waits until the other has given way (before, it started while the
         other's nodes were still up, counted their endpoints as its own and stalled at tick 0)."""
-        return self._subscription.get_publisher_count() > 1
+        contested = self._subscription.get_publisher_count() > 1
+        self.met_another |= contested
+        return contested
 
     def _receive(self, msg: String) -> None:
         if msg.data == self.claim or msg.data in self._others:
@@ -223,7 +230,43 @@ class GraphClaim:
         if (other := claim_order(msg.data)) is None:
             self._log.error(f"refused {CLAIM}: {msg.data[:80]!r} is no claim")
             return
+        self.met_another = True
         self.on_other(other < claim_order(self.claim))
+
+
+class SharedNames:
+    """Names two nodes carry before the start (graph.watch.named_twice), and what they mean. With
+    no other trial manager about, a stray's: borne for stall_timeout_s, then the graph gives way.
+    While another graph's trial manager is here, its claim decides (GraphClaim). After one was
+    here, most likely its graph's nodes on their way out (beside CPU hogs 5 s and more after it
+    gave way, and then both graphs gave way): borne LEAVING_S more, then left behind as a graph's
+    leftovers, named in a warning (a node that was killed, or whose goodbye was lost, stays in
+    the ROS graph until its DDS lease ends) and no taint while they stay."""
+
+    def __init__(self, node: Node, claim: GraphClaim, stall_timeout_s: float):
+        self._log, self._claim, self._stall_timeout_s = node.get_logger(), claim, stall_timeout_s
+        self._since = 0.0  # running time with names shared and no other trial manager here
+        self.leftovers = set()
+
+    def unexplained(self, twice: list[str]) -> list[str]:
+        """The names two nodes carry, but the leftovers (one gone meanwhile is one no more)."""
+        self.leftovers &= set(twice)
+        return [name for name in twice if name not in self.leftovers]
+
+    def check(self, twice: list[str], contested: bool, running: float) -> tuple[bool, str | None]:
+        """(whether the start waits, why this graph gives way or None), at a check before it."""
+        twice = self.unexplained(twice)
+        self._since = self._since + running if twice and not contested else 0.0
+        if not self._claim.met_another and self._since > self._stall_timeout_s:
+            return True, f"two nodes named {', '.join(twice)}"
+        if self._since > self._stall_timeout_s + LEAVING_S:
+            self.leftovers, self._since = set(twice), 0.0
+            self._log.warning(f"starting beside {', '.join(twice)} of the graph that gave way, "
+                              f"still in the ROS graph after {self._stall_timeout_s + LEAVING_S:g}"
+                              f" s: left unannounced (killed, or the goodbye lost), they go at "
+                              f"their DDS lease's end (at most {PARTICIPANT_LEASE_S:g} s)")
+            return False, None
+        return bool(twice or contested), None
 
 
 def deliver_published(node: Node) -> None:

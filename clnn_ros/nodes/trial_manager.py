@@ -15,10 +15,10 @@ What ends an episode early, with exit status 1 and the node to blame:
 * a node of `external_nodes` that leaves the ROS graph (the nodes run_all or launch started
   are theirs to watch: they see the process exit; a paused one that drops out is alive);
 * another graph of the same names in the namespace and domain (its claim, GraphClaim; its
-  lockstep traffic before this graph's first tick; names two nodes carry for `stall_timeout_s`):
-  NOT_STARTED, the run abandoned with no EPISODE_END (the other's nodes would obey it); a node
-  of `external_nodes` not there within `stall_timeout_s` once the rest is up (the others are
-  waited for as long as they take);
+  lockstep traffic before this graph's first tick; names two nodes carry for `stall_timeout_s`
+  with no other trial manager about: SharedNames): NOT_STARTED, the run abandoned with no
+  EPISODE_END (the other's nodes would obey it); a node of `external_nodes` not there within
+  `stall_timeout_s` once the rest is up (the others are waited for as long as they take);
 * a foreign publisher on a graph topic (graph.watch), unless allow_foreign_publishers: then
   the run goes on and ends "tainted", exit status 1, never "completed".
 With a recorder it keeps the clock at most RECORDER_WINDOW ticks ahead of the recorder's
@@ -52,8 +52,9 @@ from ..graph.qos import RECORDER_WINDOW
 from ..graph.run import NODE_PARAMETERS, names_list
 from ..graph.watch import another_graph, describe_foreign, foreign_publishers, gone, named_twice
 from ..core.init_weights import episode_start
-from .glue import (LOCKSTEP_QOS, PROGRESS_QOS, READY_QOS, GraphClaim, Pace, Readiness, checked,
-                   declare_run_parameters, endpoints_matched, run_node, steady_clock, use_sim_time)
+from .glue import (LOCKSTEP_QOS, PROGRESS_QOS, READY_QOS, GraphClaim, Pace, Readiness,
+                   SharedNames, checked, declare_run_parameters, endpoints_matched, run_node,
+                   steady_clock, use_sim_time)
 
 WATCHDOG_S = 0.1
 GRAPH_CHECK_S = 0.5  # how often the ROS graph is looked at once running (before: every check)
@@ -90,7 +91,7 @@ class TrialManagerNode(Node):
         self.last_note = self.last_graph_check = time.monotonic()
         self.running = RunningTime(cap=2 * WATCHDOG_S)
         self.stalled_s = 0.0  # running time of this node without progress
-        self.shared_names, self.shared_since = [], 0.0  # before the start: names two nodes carry
+        self.shared_names = []  # before the start: names two nodes carry
         self.tainted = None  # a foreign publisher seen on a graph topic
         self.named_twice = set()  # graph names two nodes carried once the graph ran
         self.exit_reason = ""
@@ -111,6 +112,7 @@ class TrialManagerNode(Node):
         self.create_subscription(String, READY, lambda msg: self.ready.add(msg.data), READY_QOS)
         self.readiness = Readiness(self, self.matched, is_running=lambda: self.join.tick > 0)
         self.claim = GraphClaim(self, self.on_other_graph)
+        self.names = SharedNames(self, self.claim, self.settings["stall_timeout_s"])
         self.pace = Pace(self, self.settings["rate_hz"], self.publish_tick)
         self.recorded_tick = -1
         self.held = None  # (tick, starts a trial): the next tick, waiting for the recorder
@@ -191,7 +193,7 @@ class TrialManagerNode(Node):
         twice = named_twice(present, self.expected | {TRIAL_MANAGER})
         if self.started_at is None:  # check_start holds the start while names are shared
             self.shared_names = twice
-        elif twice:
+        elif twice := self.names.unexplained(twice):
             # A graph that starts beside this one gives way (on_other_graph, in its own trial
             # manager): this one goes on, says what it saw, and never reports "completed".
             for name in sorted(set(twice) - self.named_twice):
@@ -242,19 +244,15 @@ class TrialManagerNode(Node):
             self.recorded_tick = max(self.recorded_tick, self.join.tick)  # its progress comes
 
     def check_start(self, now: float, running: float) -> None:
-        # Shared names are strays' (bounded) unless another trial manager is here: then its claim
-        # decides who gives way (counted meanwhile, both of two graphs once gave way).
         contested = self.claim.contested()
-        shared = self.shared_names and not contested
-        self.shared_since = self.shared_since + running if shared else 0.0
-        if self.shared_since > self.settings["stall_timeout_s"]:
-            self.stop(NOT_STARTED, another_graph(self.get_namespace(), "two nodes named "
-                                                 f"{', '.join(self.shared_names)}"))
+        hold, give_way = self.names.check(self.shared_names, contested, running)
+        if give_way:
+            self.stop(NOT_STARTED, another_graph(self.get_namespace(), give_way))
             return
-        if self.shared_names or contested:  # whose announcement? (nodes repeat)
+        if hold:  # whose announcement? (nodes repeat)
             self.ready.clear()
         missing = self.expected - self.ready
-        if not (missing or self.shared_names or contested) and self.matched():
+        if not (missing or hold) and self.matched():
             self.started_at = now
             self.advance(0, starts_trial=True)
             return

@@ -9,6 +9,9 @@ RANGE = "ROS_AUTOMATIC_DISCOVERY_RANGE"
 PROFILES_FILE = "FASTRTPS_DEFAULT_PROFILES_FILE"
 LOOPBACK_PROFILE = Path(__file__).with_name("fastdds_loopback.xml")
 SUBNET_PROFILE = Path(__file__).with_name("fastdds_subnet.xml")
+# Both profiles' participant lease: a process that ended unannounced leaves the ROS graph of the
+# others this long after (tests/test_transport.py holds it to the files).
+PARTICIPANT_LEASE_S = 180.0
 
 
 def apply_defaults(environ=os.environ) -> None:
