@@ -13,7 +13,10 @@ import numpy as np
 import pytest
 
 from clnn_ros.batch import run_batch
-from clnn_ros.core.params import Params
+from clnn_ros.core.episode import returns
+from clnn_ros.core.params import Params, params_from_strings
+from clnn_ros.core.presets import preset_values
+from clnn_ros.core.solving import solving_summary
 from clnn_ros.core.physics import FAIL_POSITION
 from clnn_ros.reproduce.__main__ import main
 from clnn_ros.reproduce.calibration import constant_force_trial
@@ -138,6 +141,27 @@ def test_sweep_writes_a_csv_per_configuration_and_a_summary(tmp_path, capsys):
     _, trials = _read_csv(tmp_path / "sweep_sigma=128_omega=64.csv")
     assert len(trials) == 3 * 6
     assert "| sigma | omega | mean steps |" in (tmp_path / "sweep_summary.md").read_text()
+
+
+def test_a_sweep_under_cartpole_v1s_protocol_says_which_seeds_solved_it(tmp_path, capsys):
+    """Episodes end at 500 steps there: seeds below 1,000 would say nothing; the summary counts
+    the seeds that solved CartPole-v1 and the median episodes it took them (core.solving)."""
+    assert main(["sweep", "--protocol", "gymnasium", "--preset", "cartpole_v1", "--param",
+                 "sigma=64,128", "--seeds", "0-3", "--trials", "200", "--out", str(tmp_path)]) == 0
+    header, rows = _read_csv(tmp_path / "sweep_summary.csv")
+    assert header[-3:] == ["mean_steps", "seeds_solved", "median_episodes_to_solve"]
+    for row in rows:
+        p = params_from_strings({**preset_values("cartpole_v1"), "protocol": "gymnasium",
+                                 "trials": "200", "sigma": row["sigma"]})
+        batch = run_batch(range(4), p)
+        solving = solving_summary([returns(steps, status) for steps, status
+                                   in zip(batch.steps, batch.end_status)])
+        assert int(row["seeds_solved"]) == solving["solved"]
+        assert row["median_episodes_to_solve"] == (str(solving["episodes"][1])
+                                                   if solving["solved"] else "")
+    assert sum(int(row["seeds_solved"]) for row in rows) > 0  # solving is exercised
+    assert "| sigma | mean steps | seeds solved | median episodes to solve |" in \
+        (tmp_path / "sweep_summary.md").read_text()
 
 
 def test_an_interrupted_sweep_resumes_without_running_a_finished_configuration(

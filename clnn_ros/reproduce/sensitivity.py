@@ -11,7 +11,9 @@ from pathlib import Path
 import numpy as np
 
 from ..batch import run_batch
+from ..core.episode import returns as episode_returns
 from ..core.params import ParamError, Params, params_from_strings
+from ..core.solving import solving_summary
 from .common import (STUCK_BELOW, TRIALS, SeedMeans, md_table, progress, run_units, stuck,
                      write_csv)
 
@@ -33,6 +35,7 @@ class SweepRun(SeedMeans):
     params: Params
     seeds: np.ndarray
     steps: np.ndarray  # (seeds, trials)
+    end_status: np.ndarray  # (seeds, trials)
 
     @property
     def tag(self) -> str:
@@ -74,8 +77,8 @@ def sweep(configs: list[tuple[dict, Params]], seeds, store: Path, log=None) -> l
     block of seeds) run on the current executor; a finished unit is stored in `store` and not
     run again (an interrupted sweep resumes). log: see run_units."""
     results = run_units([(p, seeds) for _, p in configs], "sweep", store, log=log,
-                        keep=("steps",))
-    return [SweepRun(values, p, np.asarray(seeds), result["steps"])
+                        keep=("steps", "end_status"))
+    return [SweepRun(values, p, np.asarray(seeds), result["steps"], result["end_status"])
             for (values, p), result in zip(configs, results)]
 
 
@@ -89,12 +92,30 @@ def write_sweep(runs: list[SweepRun], out: Path) -> list[Path]:
                                 for k, seed in enumerate(run.seeds)
                                 for trial in range(run.steps.shape[1]))))
     names = list(runs[0].values)
-    files.append(write_csv(out / "sweep_summary.csv",
-                           [*names, "seeds", "trials", "mean_steps", f"seeds_below_{STUCK_BELOW}"],
+    files.append(write_csv(out / "sweep_summary.csv", [*names, "seeds", "trials",
+                                                       *judged(runs[0], csv=True)],
                            [[*run.values.values(), len(run.seeds), run.steps.shape[1],
-                             round(float(run.seed_means.mean()), 2), stuck(run.seed_means)]
-                            for run in runs]))
+                             *judged(run, csv=True).values()] for run in runs]))
     return files
+
+
+def judged(run: SweepRun, csv: bool = False) -> dict:
+    """A configuration's summary columns: the mean over the seeds of the per-seed mean steps,
+    and under the paper's protocol the seeds below STUCK_BELOW; under gymnasium's (episodes of
+    500 steps at most) the seeds that solved CartPole-v1 and the median episodes it took them
+    (core.solving)."""
+    mean = float(run.seed_means.mean())
+    if run.params.protocol != "gymnasium":
+        return {"mean_steps": round(mean, 2), f"seeds_below_{STUCK_BELOW}": stuck(run.seed_means)} \
+            if csv else {"mean steps": f"{mean:,.0f}",
+                         f"seeds below {STUCK_BELOW:,}": stuck(run.seed_means)}
+    solving = solving_summary([episode_returns(steps, status)
+                               for steps, status in zip(run.steps, run.end_status)])
+    median = solving["episodes"][1] if solving["episodes"] else None
+    return {"mean_steps": round(mean, 2), "seeds_solved": solving["solved"],
+            "median_episodes_to_solve": "" if median is None else median} if csv else \
+        {"mean steps": f"{mean:,.1f}", "seeds solved": f"{solving['solved']} of {len(run.seeds)}",
+         "median episodes to solve": "—" if median is None else f"{median:g}"}
 
 
 def plot_sweep(runs: list[SweepRun], path: Path, title: str) -> Path:
@@ -117,9 +138,9 @@ def plot_sweep(runs: list[SweepRun], path: Path, title: str) -> Path:
 
 def sweep_summary_markdown(runs: list[SweepRun]) -> str:
     names = list(runs[0].values)
-    return md_table([*names, "mean steps", f"seeds below {STUCK_BELOW:,}"],
+    return md_table([*names, *judged(runs[0])],
                     [[*(f"{v:g}" if isinstance(v, float) else v for v in run.values.values()),
-                      f"{run.seed_means.mean():,.0f}", stuck(run.seed_means)] for run in runs])
+                      *judged(run).values()] for run in runs])
 
 
 def write_sweep_report(runs: list[SweepRun], seed_spec: str, out: Path) -> tuple[Path, Path]:
@@ -137,8 +158,11 @@ def write_sweep_report(runs: list[SweepRun], seed_spec: str, out: Path) -> tuple
         f"# Sweep of {', '.join(names)}\n\n"
         f"State variables {encoded}; seeds {seed_spec} ({len(runs[0].seeds)}) x {trials} trials; "
         f"the other parameters: {', '.join(fixed) or 'the paper defaults'}. Cells: the mean over "
-        f"the seeds of the per-seed mean steps, and the seeds below {STUCK_BELOW:,}. Per-trial "
-        f"steps: sweep_<configuration>.csv.\n\n"
+        f"the seeds of the per-seed mean steps, and "
+        + (f"the seeds below {STUCK_BELOW:,}" if base.protocol != "gymnasium" else
+           "(CartPole-v1's protocol) the seeds that solved it (their last 100 episodes' returns "
+           "averaging 475) and the median episodes it took them")
+        + ". Per-trial steps: sweep_<configuration>.csv.\n\n"
         f"{sweep_summary_markdown(runs)}\n\n![sweep]({figure.name})\n")
     return figure, summary
 
