@@ -203,6 +203,17 @@ def test_versus_runs_the_agents_alike_and_resumes(tmp_path, capsys):
     table = [line for line in report.splitlines() if line.startswith("| ")]
     assert [line for line in (tmp_path / "VERSUS.md").read_text().splitlines()
             if line.startswith("| ")] == table
+    # --stored-only runs nothing: an agent short of its seeds is named
+    assert reproduce_main([*argv, "--seeds", "0-2", "--stored-only"]) == 0
+    assert {p: p.stat().st_mtime_ns for p in (tmp_path / "data" / "versus").rglob("*.npz")} \
+        == stored
+    report = (tmp_path / "VERSUS.md").read_text()
+    assert "| RLN agent, preset cartpole_v1 (the batch engine) | 2 of 2 |" in report
+    assert "Partial (`--stored-only`, the rest not run yet): RLN agent, preset cartpole_v1 " \
+        "(the batch engine): 2 of its 3 seeds; ASE/ACE on the 162 boxes (Barto, Sutton & " \
+        "Anderson 1983): 2 of its 3 seeds." in report
+    assert reproduce_main([*argv, "--seeds", "5", "--stored-only"]) == 2
+    assert "no agent-seed of these stored" in capsys.readouterr().err
 
 
 def test_versus_ctrl_c_ends_at_once_in_one_line_and_keeps_what_was_stored(tmp_path):

@@ -235,8 +235,10 @@ def cmd_versus(args) -> None:
         raise ValueError(f"--workers must be at least 1, got {args.workers}")
     out = Path(args.out)
     began = time.perf_counter()
-    results = run_versus(agents, seeds, out / "data" / "versus", args.workers)
-    path = write_versus(results, args.seeds, out, time.perf_counter() - began)
+    results = run_versus(agents, seeds, out / "data" / "versus", args.workers, args.stored_only)
+    if not any(results.values()):
+        raise ValueError(f"--stored-only: no agent-seed of these stored in {out / 'data'}")
+    path = write_versus(results, seeds, args.seeds, out, time.perf_counter() - began)
     print(path.read_text())
     print(f"wrote {path}")
 
@@ -354,6 +356,9 @@ def build_parser() -> argparse.ArgumentParser:
                                                   "data/versus/)")
     vs.add_argument("--workers", type=int, default=os.cpu_count() or 1,
                     help="processes for the agents other than rln (default: one per CPU)")
+    vs.add_argument("--stored-only", action="store_true",
+                    help="run nothing: the report of the agent-seeds stored so far (an agent "
+                         "short of its seeds is named)")
     vs.set_defaults(func=cmd_versus)
 
     al = sub.add_parser("all", help="everything, then writes OUT/REPRODUCTION.md")

@@ -113,17 +113,23 @@ def agent_key(agent: str) -> list:
     return [agent, EPISODES, PLAY_EPISODES]
 
 
-def run_versus(agents: list[str], seeds: list[int], store: Path, workers: int) -> dict:
-    """{agent: {seed: arrays}}: each agent-seed stored, or run now and stored."""
+def agent_seeds(agent: str, seeds: list[int]) -> list[int]:
+    return seeds[:MUJOCO_SEEDS] if agent == "rln_mujoco" else seeds
+
+
+def run_versus(agents: list[str], seeds: list[int], store: Path, workers: int,
+               stored_only: bool = False) -> dict:
+    """{agent: {seed: arrays}}: each agent-seed stored, or run now and stored (stored_only:
+    left out)."""
     results = {agent: {} for agent in agents}
     pending = []
     for agent in agents:
         key = agent_key(agent)
-        for seed in (seeds[:MUJOCO_SEEDS] if agent == "rln_mujoco" else seeds):
+        for seed in agent_seeds(agent, seeds):
             path = store_path(store / agent, f"seed_{seed}", [key, seed])
             if path.exists():
                 results[agent][seed] = load_stored(path)
-            else:
+            elif not stored_only:
                 pending.append((agent, seed, path))
     rln_pending = [(seed, path) for agent, seed, path in pending if agent == "rln"]
     if rln_pending:  # all at once in the batch engine, its CPU time shared out evenly
@@ -223,7 +229,8 @@ def plot_returns(results: dict, path: Path) -> Path:
     return path
 
 
-def write_versus(results: dict, seeds_spec: str, out: Path, elapsed_s: float) -> Path:
+def write_versus(results: dict, run_seeds: list[int], seeds_spec: str, out: Path,
+                 elapsed_s: float) -> Path:
     """OUT/VERSUS.md, OUT/figures/versus_returns.png, OUT/data/versus_seeds.csv."""
     rows, summaries = [], {}
     for agent, seeds in results.items():
@@ -258,6 +265,12 @@ def write_versus(results: dict, seeds_spec: str, out: Path, elapsed_s: float) ->
                   "frozen play: mean return; seeds >= 475"], rows), "",
         f"![return against environment steps]({figure.relative_to(out)})", "",
     ]
+    partial = [f"{AGENTS[agent]}: {len(done)} of its {len(agent_seeds(agent, run_seeds))} seeds"
+               for agent, done in results.items()
+               if len(done) < len(agent_seeds(agent, run_seeds))]
+    if partial:
+        text += [f"Partial (`--stored-only`, the rest not run yet): {'; '.join(partial)}. Its "
+                 "row and figures are of those seeds alone.", ""]
     missing = [agent for agent in AGENTS if agent not in results]
     if missing:
         text += [f"Not in this run: {', '.join(AGENTS[a] for a in missing)} (`--agents`; ppo "
