@@ -13,6 +13,7 @@ an interrupted run resumes. ppo and dqn need the baselines extra (pip install -e
 
 from __future__ import annotations
 
+import concurrent.futures
 import multiprocessing
 import signal
 import time
@@ -97,11 +98,6 @@ def one_seed(agent: str, seed: int) -> dict:
                 play=frozen_play(run.action, seed))
 
 
-def one_job(job: tuple[str, int, Path]) -> tuple[str, int, Path, dict]:
-    agent, seed, path = job
-    return agent, seed, path, one_seed(agent, seed)
-
-
 def agent_key(agent: str) -> list:
     """What an agent's stored seeds depend on (a change runs them anew)."""
     if agent in ("rln", "rln_mujoco"):
@@ -147,17 +143,29 @@ def run_versus(agents: list[str], seeds: list[int], store: Path, workers: int,
             store_arrays(path, results["rln"][seed])
     others = [job for job in pending if job[0] != "rln"]
     if others:
-        # Pool, not concurrent.futures: Ctrl-C terminates the workers at once (a DQN seed takes
-        # a minute) and what was stored stays; the workers ignore SIGINT, so that the one line
-        # of clnn-reproduce says it, not a worker's traceback.
-        with multiprocessing.get_context("spawn").Pool(workers, initializer=signal.signal,
-                                                       initargs=(signal.SIGINT,
-                                                                 signal.SIG_IGN)) as pool:
-            finished = pool.imap_unordered(one_job, others)
-            for agent, seed, path, arrays in progress(finished, f"versus: {len(others)} "
-                                                                "agent-seeds"):
-                results[agent][seed] = arrays
-                store_arrays(path, arrays)
+        # Ctrl-C reaches the terminal's whole process group: the workers start with SIGINT
+        # blocked (a child inherits the mask), so that this process alone takes it, ends them
+        # at once (a DQN seed takes a minute) and says it in one line; what was stored stays.
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            pool = concurrent.futures.ProcessPoolExecutor(
+                workers, mp_context=multiprocessing.get_context("spawn"))
+            futures = {pool.submit(one_seed, agent, seed): (agent, seed, path)
+                       for agent, seed, path in others}
+        finally:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+        try:
+            done = concurrent.futures.as_completed(futures)
+            for future in progress(done, f"versus: {len(others)} agent-seeds"):
+                agent, seed, path = futures[future]
+                results[agent][seed] = future.result()
+                store_arrays(path, results[agent][seed])
+        except BaseException:
+            for worker in multiprocessing.active_children():
+                worker.terminate()
+            raise
+        finally:
+            pool.shutdown(cancel_futures=True)
     return results
 
 
