@@ -216,6 +216,13 @@ def test_versus_runs_the_agents_alike_and_resumes(tmp_path, capsys):
     assert "no agent-seed of these stored" in capsys.readouterr().err
 
 
+def as_in_a_terminal() -> None:
+    """A terminal's foreground process takes SIGINT. One started by a process that ignores it
+    (a job a script put in the background: pytest's, and its workers', in such a suite run)
+    inherits the ignoring, and Python then sets no KeyboardInterrupt: Ctrl-C did nothing."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_versus_ctrl_c_ends_at_once_in_one_line_and_keeps_what_was_stored(tmp_path):
     """Ctrl-C (SIGINT to the terminal's whole process group, workers included): exit 130 with
     one line, no worker left running, every agent-seed stored before it readable."""
@@ -223,7 +230,7 @@ def test_versus_ctrl_c_ends_at_once_in_one_line_and_keeps_what_was_stored(tmp_pa
     run = subprocess.Popen([sys.executable, "-m", "clnn_ros.reproduce", "versus", "--agents",
                             "ase_ace", "--seeds", "0-999", "--workers", "2", "--out",
                             str(tmp_path)], stderr=subprocess.PIPE, text=True,
-                           start_new_session=True)
+                           start_new_session=True, preexec_fn=as_in_a_terminal)
     try:
         deadline = time.monotonic() + HANG_S
         while len(list(stored.glob("*.npz"))) < 2 and run.poll() is None:
