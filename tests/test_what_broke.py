@@ -18,6 +18,7 @@ import signal
 import subprocess
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
@@ -85,6 +86,15 @@ PROCESSES = ("environment", "encoder", "reward", "agent", "recorder", "trial_man
 PAUSE_S = 60
 
 
+def pause_under_way(process: subprocess.Popen, module: str) -> tuple[int, float]:
+    """Stop (SIGSTOP) the run's process of `module` once the run has begun its second trial:
+    (its pid, when)."""
+    wait_for_line(process.stdout, "trial    2/", errors=process.stderr)
+    pid = child(process, module)
+    os.kill(pid, signal.SIGSTOP)
+    return pid, time.monotonic()
+
+
 def test_a_minute_long_pause_of_any_process_is_no_death(tmp_path, tmp_path_factory):
     """Each of the six processes paused (SIGSTOP) for 60 s, past Fast DDS's default lease of
     20 s (the project's profile: 180 s), in a run of its own (stall timeout 120 s); the six
@@ -97,12 +107,15 @@ def test_a_minute_long_pause_of_any_process_is_no_death(tmp_path, tmp_path_facto
         env = ros_environment(free_domain_id(), tmp_path_factory)
         runs[node] = start(env, tmp_path / node, "--stall-timeout", str(2 * PAUSE_S))
     try:
-        for node, process in runs.items():  # each paused as soon as it is under way
-            wait_for_line(process.stdout, "trial    2/", errors=process.stderr)
-            pid = child(process, f"clnn_ros.nodes.{node}")
-            os.kill(pid, signal.SIGSTOP)
-            paused[node] = (pid, time.monotonic())
-        for pid, since in paused.values():
+        # Each paused as soon as its run is under way, all at once: paused in turn, a run that got
+        # ahead while the earlier ones were awaited could end before its turn (seen in CI).
+        with ThreadPoolExecutor(len(runs)) as pool:
+            pausing = {node: pool.submit(pause_under_way, process, f"clnn_ros.nodes.{node}")
+                       for node, process in runs.items()}
+        paused = {node: f.result() for node, f in pausing.items() if f.exception() is None}
+        for future in pausing.values():
+            future.result()  # the first failure, raised
+        for pid, since in sorted(paused.values(), key=lambda paused_at: paused_at[1]):
             time.sleep(max(0.0, since + PAUSE_S - time.monotonic()))
             os.kill(pid, signal.SIGCONT)
         ended = {node: process.communicate(timeout=HANG_S) for node, process in runs.items()}
@@ -110,6 +123,10 @@ def test_a_minute_long_pause_of_any_process_is_no_death(tmp_path, tmp_path_facto
         for pid, _ in paused.values():  # a failed wait leaves none stopped
             with contextlib.suppress(ProcessLookupError):  # ended: the run went on
                 os.kill(pid, signal.SIGCONT)
+        for process in runs.values():  # nor any run going on beside the tests that follow
+            if process.poll() is None:
+                os.killpg(process.pid, signal.SIGINT)
+                process.communicate(timeout=HANG_S)
     for node, process in runs.items():
         stderr = ended[node][1]
         assert process.returncode == 0, (node, stderr[-3000:])
@@ -314,11 +331,13 @@ with ros_session(sys.argv) as signals:
         rclpy.spin_once(manager, timeout_sec=0.1)
     claim.wait_for_all_acked()
     manager.destroy_node()
-    print("its trial manager left", flush=True)
+    print(f"its trial manager left at {time.time():.3f}", flush=True)
     end = time.monotonic() + float(sys.argv[2])
     while not signals and time.monotonic() < end:
         rclpy.spin_once(agent, timeout_sec=0.1)
     agent.destroy_node()
+    print(f"its agent left at {time.time():.3f}", flush=True)
+print(f"its process ends at {time.time():.3f}", flush=True)
 """
 
 
@@ -352,12 +371,13 @@ def test_the_nodes_of_a_graph_that_gave_way_are_waited_for_as_they_leave(ros_env
     finally:
         go.touch()
         leaving.kill()
-        leaving.communicate()
-    assert process.returncode == 0 and "completed" in stdout, stderr[-3000:]
-    assert problem_lines(stderr) == [], stderr[-3000:]
-    assert "a second graph started in namespace / at tick 0: it gives way" in stderr
+        left, _ = leaving.communicate()
+    told = f"{stderr[-3000:]}\nthe stand-in's times: {left!r}"  # beside the graph's
+    assert process.returncode == 0 and "completed" in stdout, told
+    assert problem_lines(stderr) == [], told
+    assert "a second graph started in namespace / at tick 0: it gives way" in stderr, told
     assert ("[trial_manager]: starting beside agent of the graph that gave way" in stderr) == \
-        killed, stderr[-3000:]
+        killed, told
     assert steps_of(tmp_path / "out") == core_steps(TRIALS)
     assert not processes_with(str(tmp_path))
 

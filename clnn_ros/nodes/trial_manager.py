@@ -19,8 +19,8 @@ What ends an episode early, with exit status 1 and the node to blame:
   with no other trial manager about: SharedNames): NOT_STARTED, the run abandoned with no
   EPISODE_END (the other's nodes would obey it); a node of `external_nodes` not there within
   `stall_timeout_s` once the rest is up (the others are waited for as long as they take);
-* a foreign publisher on a graph topic (graph.watch), unless allow_foreign_publishers: then
-  the run goes on and ends "tainted", exit status 1, never "completed".
+* a foreign publisher on a graph topic once running (graph.watch), unless
+  allow_foreign_publishers: then the run goes on and ends "tainted", never "completed".
 With a recorder it keeps the clock at most RECORDER_WINDOW ticks ahead of the recorder's
 progress, so that no message is lost to a slow recorder. Results go to out_dir as each trial
 ends (trials.csv; written to a temporary file, then renamed: a full disk keeps the last whole
@@ -207,6 +207,8 @@ class TrialManagerNode(Node):
         self.in_graph |= {n for n in self.expected if present[n]}
         if left := gone(self.in_graph, present, self.external_nodes):
             return f"node '{left[0]}' left the ROS graph at tick {self.join.tick}"
+        if self.started_at is None:  # before the first tick its traffic judges it (seen): one
+            return None  # outcome, not a race of its name's discovery and its first message
         foreign = foreign_publishers({topic: [
             (info.node_name, info.node_namespace)
             for info in self.get_publishers_info_by_topic(self.resolve_topic_name(topic))]
