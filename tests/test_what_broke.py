@@ -351,7 +351,8 @@ def test_the_nodes_of_a_graph_that_gave_way_are_waited_for_as_they_leave(ros_env
     agent stays twice the stall timeout); a node killed stays in the ROS graph until its DDS
     lease ends (180 s): the graph starts beside it after LEAVING_S more, says so, and completes
     equal to the core, untainted."""
-    # A domain of its own: the killed stand-in's agent stays in it until its lease ends (180 s)
+    # A domain of its own: no node of the module's other tests about (not needed against the
+    # killed stand-in's agent: a participant that starts later never sees a dead one)
     ros_env = {**ros_env, "ROS_DOMAIN_ID": free_domain_id()}
     linger_s = 2 * RUN_SETTINGS["stall_timeout_s"]
     leaving = subprocess.Popen(

@@ -186,7 +186,7 @@ class TrialManagerNode(Node):
 
     def graph_problem(self) -> str | None:
         """Names two nodes carry (before the start, check_start holds it; after, a warning and a
-        taint), a node started by someone else that left, a foreign publisher (graph.watch)."""
+        taint), a node started by someone else that left, a foreign publisher once running."""
         namespace = self.get_namespace()
         present = Counter(name for name, ns in self.get_node_names_and_namespaces()
                           if ns == namespace)
