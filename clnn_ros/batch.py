@@ -356,7 +356,7 @@ def run_batch(seeds, p: Params, weights: np.ndarray | None = None, angles: np.nd
     starts, angles_out = [], []
     for s in seeds:
         given, in_radians = trial_starts(int(s), p, angles)
-        starts.append([start_in_units(start, in_radians, radians is not None) for start in given])
+        starts.append([start_in_units(start, in_radians, radians) for start in given])
         angles_out.append([first_angle(start, in_radians) for start in given])
     trials = p.trials if angles is None else len(angles)
     all_starts = np.array(starts, dtype=np.float64).reshape(len(seeds), trials, 4)

@@ -218,7 +218,7 @@ def physics_summary(run: Params) -> str:
 def expected_state(before, direction: int, run: Params) -> tuple:
     """The state after `before` (degrees, as messages carry it) under the run's physics."""
     radians = state_in_radians(run)
-    start = start_in_units(before, False, radians is not None)
+    start = start_in_units(before, False, radians)
     return in_degrees(*physics_step(*start, direction * run.force, physics_constants(run),
                                     radians)[:4], radians)
 

@@ -159,12 +159,13 @@ def at_rest(initial_angle_deg: float) -> tuple:
     return 0.0, 0.0, initial_angle_deg, 0.0
 
 
-def start_in_units(start, start_in_radians: bool, in_radians: bool) -> tuple:
-    """A trial's start (x, x_dot, theta, theta_dot) in a physics' own units: the paper's
-    protocol gives it in degrees, gymnasium's in radians; converted where the physics keeps the
-    other unit (math.radians' and math.degrees' factors), else as it is, bit for bit."""
+def start_in_units(start, start_in_radians: bool, radians: bool | None) -> tuple:
+    """A trial's start (x, x_dot, theta, theta_dot) in a physics' own units (`radians`: as
+    state_in_radians has them): the paper's protocol gives it in degrees, gymnasium's in
+    radians; converted where the physics keeps the other unit (math.radians' and math.degrees'
+    factors), else as it is, bit for bit."""
     x, x_dot, theta, theta_dot = (float(v) for v in start)
-    if start_in_radians == in_radians:
+    if start_in_radians == bool(radians):
         return x, x_dot, theta, theta_dot
     factor = RAD_TO_DEG if start_in_radians else DEG
     return x, x_dot, theta * factor, theta_dot * factor
@@ -190,7 +191,6 @@ class CartPole:
         self.params = params
         self._constants = physics_constants(params)
         self._radians = state_in_radians(params)
-        self.in_radians = self._radians is not None
         self.state_in_own_units = (0.0, 0.0, 0.0, 0.0)
         self.state = (0.0, 0.0, 0.0, 0.0)
 
@@ -198,7 +198,7 @@ class CartPole:
         """Trial start at (x, x_dot, theta, theta_dot), angles in degrees or radians (or one
         F = 0 step later: first_action="no_force"); the paper's: at_rest(angle)."""
         self.state_in_own_units = trial_start_state(
-            *start_in_units(start, start_in_radians, self.in_radians),
+            *start_in_units(start, start_in_radians, self._radians),
             self.params.first_action == "no_force", self._constants, self._radians)
         self.state = in_degrees(*self.state_in_own_units, self._radians)
         return self.state

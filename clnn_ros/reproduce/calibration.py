@@ -77,7 +77,7 @@ class Calibration:
 def constant_force_trial(p: Params, force: float, angle_deg: float = 0.0) -> tuple[int, int]:
     """(successful steps, end status) under a constant force (N) from rest at `angle_deg`."""
     constants, radians = physics_constants(p), state_in_radians(p)
-    x, x_dot, theta, theta_dot = start_in_units(at_rest(angle_deg), False, radians is not None)
+    x, x_dot, theta, theta_dot = start_in_units(at_rest(angle_deg), False, radians)
     for steps in range(p.max_steps):
         x, x_dot, theta, theta_dot, status = physics_step(x, x_dot, theta, theta_dot, force,
                                                           constants, radians)

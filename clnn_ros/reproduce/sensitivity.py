@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +42,27 @@ class SweepRun(SeedMeans):
     def tag(self) -> str:
         return "_".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
                         for k, v in self.values.items())
+
+    @cached_property
+    def judged(self) -> list[tuple[str, str, object, object]]:
+        """A configuration's summary columns, each (CSV name, table name, CSV value, table
+        value): the mean over the seeds of the per-seed mean steps, and under the paper's
+        protocol the seeds below STUCK_BELOW; under gymnasium's (episodes of 500 steps at most)
+        the seeds that solved CartPole-v1 and the median episodes it took them (core.solving).
+        Computed once: the CSV and the table both take it."""
+        mean = float(self.seed_means.mean())
+        if self.params.protocol != "gymnasium":
+            below = stuck(self.seed_means)
+            return [("mean_steps", "mean steps", round(mean, 2), f"{mean:,.0f}"),
+                    (f"seeds_below_{STUCK_BELOW}", f"seeds below {STUCK_BELOW:,}", below, below)]
+        solving = solving_summary([episode_returns(steps, status)
+                                   for steps, status in zip(self.steps, self.end_status)])
+        median = solving["episodes"][1] if solving["episodes"] else None
+        return [("mean_steps", "mean steps", round(mean, 2), f"{mean:,.1f}"),
+                ("seeds_solved", "seeds solved", solving["solved"],
+                 f"{solving['solved']} of {len(self.seeds)}"),
+                ("median_episodes_to_solve", "median episodes to solve",
+                 "" if median is None else median, "—" if median is None else f"{median:g}")]
 
 
 def parse_grid(items: list[str]) -> dict[str, list[str]]:
@@ -93,30 +115,10 @@ def write_sweep(runs: list[SweepRun], out: Path) -> list[Path]:
                                 for trial in range(run.steps.shape[1]))))
     names = list(runs[0].values)
     files.append(write_csv(out / "sweep_summary.csv",
-                           [*names, "seeds", "trials", *(c[0] for c in judged(runs[0]))],
+                           [*names, "seeds", "trials", *(c[0] for c in runs[0].judged)],
                            [[*run.values.values(), len(run.seeds), run.steps.shape[1],
-                             *(c[2] for c in judged(run))] for run in runs]))
+                             *(c[2] for c in run.judged)] for run in runs]))
     return files
-
-
-def judged(run: SweepRun) -> list[tuple[str, str, object, object]]:
-    """A configuration's summary columns, each (CSV name, table name, CSV value, table value):
-    the mean over the seeds of the per-seed mean steps, and under the paper's protocol the seeds
-    below STUCK_BELOW; under gymnasium's (episodes of 500 steps at most) the seeds that solved
-    CartPole-v1 and the median episodes it took them (core.solving)."""
-    mean = float(run.seed_means.mean())
-    if run.params.protocol != "gymnasium":
-        below = stuck(run.seed_means)
-        return [("mean_steps", "mean steps", round(mean, 2), f"{mean:,.0f}"),
-                (f"seeds_below_{STUCK_BELOW}", f"seeds below {STUCK_BELOW:,}", below, below)]
-    solving = solving_summary([episode_returns(steps, status)
-                               for steps, status in zip(run.steps, run.end_status)])
-    median = solving["episodes"][1] if solving["episodes"] else None
-    return [("mean_steps", "mean steps", round(mean, 2), f"{mean:,.1f}"),
-            ("seeds_solved", "seeds solved", solving["solved"],
-             f"{solving['solved']} of {len(run.seeds)}"),
-            ("median_episodes_to_solve", "median episodes to solve",
-             "" if median is None else median, "—" if median is None else f"{median:g}")]
 
 
 def plot_sweep(runs: list[SweepRun], path: Path, title: str) -> Path:
@@ -139,9 +141,9 @@ def plot_sweep(runs: list[SweepRun], path: Path, title: str) -> Path:
 
 def sweep_summary_markdown(runs: list[SweepRun]) -> str:
     names = list(runs[0].values)
-    return md_table([*names, *(c[1] for c in judged(runs[0]))],
+    return md_table([*names, *(c[1] for c in runs[0].judged)],
                     [[*(f"{v:g}" if isinstance(v, float) else v for v in run.values.values()),
-                      *(c[3] for c in judged(run))] for run in runs])
+                      *(c[3] for c in run.judged)] for run in runs])
 
 
 def write_sweep_report(runs: list[SweepRun], seed_spec: str, out: Path) -> tuple[Path, Path]:
