@@ -22,3 +22,13 @@ def test_dqn_takes_the_zoos_network():
     arguments, n_envs, n_timesteps = model_arguments(zoo_entry("dqn")[0])
     assert (n_envs, n_timesteps) == (1, 50_000)
     assert arguments["policy_kwargs"] == {"net_arch": [256, 256]}
+
+
+def test_a_longer_dqn_budget_keeps_its_exploration_schedule_in_steps():
+    """dqn_4x trains four times as long and no otherwise: epsilon still decays over the first
+    8,000 steps (16 % of 50,000). PPO's schedules are fractions of the training: refused."""
+    arguments, _, n_timesteps = model_arguments(zoo_entry("dqn")[0], budget_factor=4)
+    assert n_timesteps == 200_000
+    assert arguments["exploration_fraction"] * n_timesteps == pytest.approx(8_000)
+    with pytest.raises(ValueError, match="lin_ schedules"):
+        model_arguments(zoo_entry("ppo")[0], budget_factor=4)

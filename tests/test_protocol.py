@@ -253,7 +253,7 @@ def test_versus_ctrl_c_ends_at_once_in_one_line_and_keeps_what_was_stored(tmp_pa
 
 
 @pytest.mark.parametrize("agents, message", [
-    ("rln,a2c", "unknown agent 'a2c'; known: rln, rln_mujoco, ase_ace, ppo, dqn"),
+    ("rln,a2c", "unknown agent 'a2c'; known: rln, rln_mujoco, ase_ace, ppo, dqn, dqn_4x"),
 ])
 def test_versus_refuses_an_unknown_agent_in_one_line(tmp_path, capsys, agents, message):
     assert reproduce_main(["versus", "--agents", agents, "--out", str(tmp_path)]) == 2

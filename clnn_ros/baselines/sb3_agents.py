@@ -29,7 +29,6 @@ class TrainingRun:
     returns: np.ndarray  # each training episode's return, in the order they ended
     env_steps: np.ndarray  # the agent's environment steps when each ended
     cpu_s: float  # the process's CPU time for the training (every thread)
-    budget: int  # rl-zoo3's n_timesteps
     action: Callable[[object], int]  # the trained policy, deterministic: observation -> action
 
 
@@ -41,15 +40,22 @@ def zoo_entry(algorithm: str) -> tuple[dict, Path]:
     return dict(yaml.safe_load(path.read_text())[ENV_ID]), path
 
 
-def model_arguments(entry: dict) -> tuple[dict, int, int]:
+def model_arguments(entry: dict, budget_factor: int = 1) -> tuple[dict, int, int]:
     """(the model's keyword arguments, n_envs, n_timesteps) of a zoo entry, its schedules
     ("lin_X": linearly from X to 0 over the training) and policy_kwargs (a Python expression
-    of dicts and lists) turned into objects as rl-zoo3's ExperimentManager does."""
+    of dicts and lists) turned into objects as rl-zoo3's ExperimentManager does. A
+    `budget_factor` multiplies n_timesteps and keeps DQN's exploration schedule in steps (its
+    exploration_fraction is of the whole training), so that the agent only trains longer."""
     from rl_zoo3.utils import linear_schedule
 
     arguments = dict(entry)
     n_envs = int(arguments.pop("n_envs", 1))
-    n_timesteps = int(arguments.pop("n_timesteps"))
+    n_timesteps = int(arguments.pop("n_timesteps")) * budget_factor
+    if budget_factor != 1:
+        if any(isinstance(v, str) and v.startswith("lin_") for v in arguments.values()):
+            raise ValueError("a longer budget would stretch this entry's lin_ schedules")
+        if "exploration_fraction" in arguments:
+            arguments["exploration_fraction"] /= budget_factor
     for name, value in arguments.items():
         if isinstance(value, str) and value.startswith("lin_"):
             arguments[name] = linear_schedule(float(value.removeprefix("lin_")))
@@ -59,10 +65,11 @@ def model_arguments(entry: dict) -> tuple[dict, int, int]:
     return arguments, n_envs, n_timesteps
 
 
-def train(algorithm: str, seed: int) -> TrainingRun:
-    """One seed of the algorithm, for rl-zoo3's budget or until it has solved CartPole-v1 (the
-    point of solving is the same either way: it is judged on the training returns). One torch
-    thread: the seeds of a benchmark run side by side, one a core."""
+def train(algorithm: str, seed: int, budget_factor: int = 1) -> TrainingRun:
+    """One seed of the algorithm, for rl-zoo3's budget (times `budget_factor`) or until it has
+    solved CartPole-v1 (the point of solving is the same either way: it is judged on the
+    training returns). One torch thread: the seeds of a benchmark run side by side, one a
+    core."""
     import torch
     from stable_baselines3 import DQN, PPO
     from stable_baselines3.common.callbacks import BaseCallback
@@ -70,7 +77,7 @@ def train(algorithm: str, seed: int) -> TrainingRun:
     from stable_baselines3.common.logger import Logger
 
     torch.set_num_threads(1)
-    arguments, n_envs, n_timesteps = model_arguments(zoo_entry(algorithm)[0])
+    arguments, n_envs, n_timesteps = model_arguments(zoo_entry(algorithm)[0], budget_factor)
     returns, env_steps = [], []
 
     class EpisodeRecorder(BaseCallback):
@@ -90,5 +97,5 @@ def train(algorithm: str, seed: int) -> TrainingRun:
     model.learn(total_timesteps=n_timesteps, callback=EpisodeRecorder())
     cpu_s = time.process_time() - began
     env.close()
-    return TrainingRun(np.array(returns), np.array(env_steps), cpu_s, n_timesteps,
+    return TrainingRun(np.array(returns), np.array(env_steps), cpu_s,
                        lambda observation: int(model.predict(observation, deterministic=True)[0]))

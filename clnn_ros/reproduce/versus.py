@@ -2,12 +2,13 @@
 beside the field's agents in one run: the same protocol, the same seeds, the same machine.
 Written to OUT/VERSUS.md with a figure and a CSV.
 
-    clnn-reproduce versus [--seeds 0-127] [--agents rln,rln_mujoco,ase_ace,ppo,dqn] [--out docs]
+    clnn-reproduce versus [--seeds 0-127] [--agents rln,rln_mujoco,ase_ace,ppo,dqn,dqn_4x]
+                          [--out docs]
 
 Every agent is judged alike (core.solving): on the returns of its training episodes, solved at
 the first episode whose last 100 average 475 or more; environment steps counted over all its
 environments. Each agent-seed is stored once finished (OUT/data/versus/) and not run again:
-an interrupted run resumes. ppo and dqn need the baselines extra (pip install -e
+an interrupted run resumes. ppo, dqn and dqn_4x need the baselines extra (pip install -e
 '.[baselines]'); the others run from the README's setup.
 """
 
@@ -36,12 +37,16 @@ AGENTS = {
     "ase_ace": "ASE/ACE on the 162 boxes (Barto, Sutton & Anderson 1983)",
     "ppo": "PPO, rl-zoo3's hyperparameters (stable-baselines3)",
     "dqn": "DQN, rl-zoo3's hyperparameters (stable-baselines3)",
+    "dqn_4x": "DQN, rl-zoo3's hyperparameters, 4x its budget (stable-baselines3)",
 }
-DEEP = ("ppo", "dqn")  # the baselines extra's
+# The baselines extra's agents: (stable-baselines3 algorithm, factor on rl-zoo3's budget).
+# dqn_4x: DQN given room to solve (rl-zoo3's 50,000 steps leave it none, CARTPOLE_V1.md).
+DEEP = {"ppo": ("ppo", 1), "dqn": ("dqn", 1), "dqn_4x": ("dqn", 4)}
 PRESET = "cartpole_v1"
 EPISODES = 512  # the budget of the RLN agents and ASE/ACE (PPO and DQN: rl-zoo3's n_timesteps)
 PLAY_EPISODES = 100  # frozen play in gymnasium.make("CartPole-v1"), starts as gym-eval's
-MUJOCO_SEEDS = 32  # the MuJoCo agent runs on the first this many seeds (5 s a seed)
+# Agents run on the first this many seeds alone: MuJoCo (5 s a seed), DQN 4x (5 CPU-min).
+FIRST_SEEDS = {"rln_mujoco": 32, "dqn_4x": 16}
 
 
 def rln_params() -> Params:
@@ -58,7 +63,7 @@ def check_agents(names: list[str]) -> None:
             import rl_zoo3  # noqa: F401
             import stable_baselines3  # noqa: F401
         except ImportError:
-            raise ValueError("ppo and dqn need the baselines extra: pip install -e "
+            raise ValueError(f"{', '.join(DEEP)} need the baselines extra: pip install -e "
                              "'.[baselines]' (docs/VERSUS.md)") from None
 
 
@@ -93,7 +98,8 @@ def one_seed(agent: str, seed: int) -> dict:
         return dict(returns=returns, env_steps=np.cumsum(returns), cpu_s=cpu_s,
                     play=frozen_play(learner.frozen_action, seed))
     from ..baselines.sb3_agents import train as train_deep
-    run = train_deep(agent, seed)
+    algorithm, budget_factor = DEEP[agent]
+    run = train_deep(algorithm, seed, budget_factor)
     return dict(returns=run.returns, env_steps=run.env_steps, cpu_s=run.cpu_s,
                 play=frozen_play(run.action, seed))
 
@@ -105,12 +111,13 @@ def agent_key(agent: str) -> list:
     if agent in DEEP:
         from ..baselines.sb3_agents import zoo_entry
         import stable_baselines3
-        return [agent, zoo_entry(agent)[0], stable_baselines3.__version__, PLAY_EPISODES]
+        return [agent, zoo_entry(DEEP[agent][0])[0], stable_baselines3.__version__,
+                PLAY_EPISODES]
     return [agent, EPISODES, PLAY_EPISODES]
 
 
 def agent_seeds(agent: str, seeds: list[int]) -> list[int]:
-    return seeds[:MUJOCO_SEEDS] if agent == "rln_mujoco" else seeds
+    return seeds[:FIRST_SEEDS[agent]] if agent in FIRST_SEEDS else seeds
 
 
 def run_versus(agents: list[str], seeds: list[int], store: Path, workers: int,
@@ -264,7 +271,11 @@ def write_versus(results: dict, run_seeds: list[int], seeds_spec: str, out: Path
         f"*Training length*: the RLN agents run all {EPISODES} episodes (the batch engine runs "
         "whole episodes); ASE/ACE, PPO and DQN stop once solved (where they solve is the same "
         f"either way), else at their budget: ASE/ACE {EPISODES} episodes, PPO and DQN "
-        "rl-zoo3's `n_timesteps`. Frozen play is of the final policy: the RLN agent's after "
+        "rl-zoo3's `n_timesteps`, DQN 4x four times that with rl-zoo3's exploration schedule "
+        "kept in steps (epsilon from 1 to 0.04 over the first 8,000; not rl-zoo3's tuned "
+        f"agent: DQN given room to solve, on the first {FIRST_SEEDS['dqn_4x']} seeds; the "
+        f"MuJoCo agent on the first {FIRST_SEEDS['rln_mujoco']}). Frozen play is of the final "
+        "policy: the RLN agent's after "
         f"{EPISODES} episodes, the others' where they stopped. *CPU s per solved seed*: the CPU "
         "time of all the agent's seeds (every thread; for the batch engine its run shared out "
         "evenly) over the seeds that solved.", "",
@@ -281,13 +292,16 @@ def write_versus(results: dict, run_seeds: list[int], seeds_spec: str, out: Path
                  "row and figures are of those seeds alone.", ""]
     missing = [agent for agent in AGENTS if agent not in results]
     if missing:
-        text += [f"Not in this run: {', '.join(AGENTS[a] for a in missing)} (`--agents`; ppo "
-                 "and dqn need the baselines extra, pip install -e '.[baselines]').", ""]
-    rln = summaries.get("rln")
+        text += [f"Not in this run: {', '.join(AGENTS[a] for a in missing)} (`--agents`; "
+                 f"{', '.join(DEEP)} need the baselines extra, pip install -e '.[baselines]').",
+                 ""]
     for agent in DEEP:
         other = summaries.get(agent)
+        # the RLN agent on the same seeds as the other (dqn_4x runs on the first 32 alone)
+        rln = agent_row("rln", {seed: arrays for seed, arrays in results.get("rln", {}).items()
+                                if seed in results[agent]})[1] if agent in results else None
         if rln and other and rln["median_steps"] and other["median_steps"]:
-            text.append(f"* RLN agent against {agent.upper()}: "
+            text.append(f"* RLN agent against {AGENTS[agent]}, on its {other['seeds']} seeds: "
                         f"{other['median_steps'] / rln['median_steps']:.2f}x fewer environment "
                         f"steps to solve (medians); "
                         f"{other['cpu_per_solved'] / rln['cpu_per_solved']:,.0f}x less CPU time "
