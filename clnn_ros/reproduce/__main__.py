@@ -53,7 +53,7 @@ from .sensitivity import (SENSITIVITY_SEEDS, check_sweep_names, parse_grid,
 from .goals import REPORT_SEEDS, SELECT_SEEDS as GOAL_SELECT_SEEDS, PLAY_EPISODES, goals_study, \
     goals_markdown, plot_curves, write_goals
 from .report import claims_markdown, data_files_markdown, header_markdown, write_report
-from .versus import AGENTS, DEEP, check_agents, run_versus, write_versus
+from .versus import AGENTS, DEEP, FIRST_SEEDS, check_agents, run_versus, write_versus
 
 PRESET_HELP = ("a named set of parameter values (" + ", ".join(PRESETS) + "; the command "
                "'presets' lists them) that the other flags and --options override")
@@ -348,7 +348,8 @@ def build_parser() -> argparse.ArgumentParser:
     vs = sub.add_parser("versus", help="CartPole-v1 as the RL field measures agents: the RLN "
                                        "agent beside ASE/ACE, PPO and DQN: OUT/VERSUS.md")
     vs.add_argument("--seeds", default=REPORT_SEEDS,
-                    help="seeds, every agent the same (rln_mujoco: the first 32; dqn_4x: 16)")
+                    help="seeds, every agent the same (" + "; ".join(
+                        f"{agent}: the first {n}" for agent, n in FIRST_SEEDS.items()) + ")")
     vs.add_argument("--agents", default=",".join(AGENTS),
                     help=f"comma-separated, of: {', '.join(AGENTS)} ({', '.join(DEEP)} "
                          "need pip install -e '.[baselines]')")

@@ -297,10 +297,12 @@ def write_versus(results: dict, run_seeds: list[int], seeds_spec: str, out: Path
                  ""]
     for agent in DEEP:
         other = summaries.get(agent)
-        # the RLN agent on the same seeds as the other (dqn_4x runs on the first 32 alone)
+        if not (other and other["median_steps"]):
+            continue
+        # the RLN agent on the other's seeds (an agent of FIRST_SEEDS runs on fewer)
         rln = agent_row("rln", {seed: arrays for seed, arrays in results.get("rln", {}).items()
-                                if seed in results[agent]})[1] if agent in results else None
-        if rln and other and rln["median_steps"] and other["median_steps"]:
+                                if seed in results[agent]})[1]
+        if rln["median_steps"]:
             text.append(f"* RLN agent against {AGENTS[agent]}, on its {other['seeds']} seeds: "
                         f"{other['median_steps'] / rln['median_steps']:.2f}x fewer environment "
                         f"steps to solve (medians); "
