@@ -36,7 +36,7 @@ from .core import encoder, jitable, params, physics, random_stream, rln
 from .core import rule as rule_values
 from .core.encoder import Encoder, encode_active
 from .core.episode import angle_grid, first_angle, seed_setup, trial_starts
-from .core.params import Params
+from .core.params import CARTPOLE, ParamError, Params
 from .core.physics import (CONTINUE, in_degrees, physics_constants, physics_step, start_in_units,
                            state_in_radians, trial_start_state)
 from .core.rln import (NEVER, NONE, TIE_RANDOM, Rule, explore, infer, outcome, rerandomize,
@@ -105,8 +105,8 @@ def _act(lane, clock, setting):
     # draw anew on every tie): it is cached per pattern, and made again when the pattern comes
     # back after a change of the weights.
     if decisions[pattern, 0] == STALE or rule.tie_break == TIE_RANDOM:
-        decisions[pattern] = infer(weights, active, rule, rng, responses)
-    return explore(decisions[pattern, 0], rule, rng), pattern
+        decisions[pattern, 0] = infer(weights, active, rule, rng, responses, decisions[pattern, 1:])
+    return explore(decisions[pattern, 0], weights.shape[0], rule, rng), pattern
 
 
 @register_jitable(forceinline=True)
@@ -131,8 +131,8 @@ def _learn(lane, clock, setting, neuron, pattern, stepped):
     x, x_dot, theta, theta_dot, status = stepped
     # Tagged after the step (it reads nothing the step writes): the step's long chain of
     # dependent operations, which the next tick waits for, starts the earliest.
-    tag_action_path(punish_tagged_at, reward_tagged_at, eligible, neuron,
-                    (decisions[pattern, 1], decisions[pattern, 2]), active, now, rule)
+    tag_action_path(punish_tagged_at, reward_tagged_at, eligible, neuron, decisions[pattern, 1:],
+                    active, now, rule)
     kind, successes = outcome(successes, status != CONTINUE, rule)
     if learn and kind == NONE:
         now = update(kind, weights, punish_tagged_at, reward_tagged_at, eligible, active, now,
@@ -220,12 +220,13 @@ def _lane(k, episodes, scratch):
 
 
 @numba.njit(cache=True)
-def _scratch(n_patterns, n_segments, n_inputs, n_vars):
-    """A lane's own arrays: (decisions, punish_tagged_at, reward_tagged_at, eligible, active,
-    responses)."""
-    return (np.empty((n_patterns, 3), np.int64), np.empty((2, n_segments, n_inputs), np.int64),
-            np.empty((2, n_segments), np.int64), np.empty((2, n_segments, n_inputs), np.uint8),
-            np.empty(n_vars, np.int64), response_space(n_segments))
+def _scratch(n_patterns, n_neurons, n_segments, n_inputs, n_vars):
+    """A lane's own arrays: (decisions: per input pattern the acting neuron and each neuron's
+    winning segment, punish_tagged_at, reward_tagged_at, eligible, active, responses)."""
+    shape = (n_neurons, n_segments, n_inputs)
+    return (np.empty((n_patterns, 1 + n_neurons), np.int64), np.empty(shape, np.int64),
+            np.empty((n_neurons, n_segments), np.int64), np.empty(shape, np.uint8),
+            np.empty(n_vars, np.int64), response_space(n_neurons, n_segments))
 
 
 # No reference counting here and in _tick: it would cost more than a tick's own work. All the
@@ -268,7 +269,7 @@ def _run_many(weights, starts, constants, force, components, edges, offsets, max
               released, rule, learn, radians, rng, steps_out, status_out, n_threads):
     """Every seed's episode in place: `weights` end as the final weights, per-trial results in
     the outputs."""
-    n_seeds, n_segments, n_inputs = weights.shape[0], weights.shape[2], weights.shape[3]
+    n_seeds, n_neurons, n_segments, n_inputs = weights.shape
     if n_seeds == 0 or starts.shape[1] == 0:
         return
     n_vars = components.shape[0]
@@ -286,8 +287,8 @@ def _run_many(weights, starts, constants, force, components, edges, offsets, max
         _work(taken, (weights, starts, steps_out, status_out, rng),
               (constants, force, components, edges, offsets, radix, max_steps, released, rule,
                learn, radians),
-              _scratch(n_patterns, n_segments, n_inputs, n_vars),
-              _scratch(n_patterns, n_segments, n_inputs, n_vars))
+              _scratch(n_patterns, n_neurons, n_segments, n_inputs, n_vars),
+              _scratch(n_patterns, n_neurons, n_segments, n_inputs, n_vars))
 
 
 def _drop_stale_cache() -> None:
@@ -346,6 +347,8 @@ def run_batch(seeds, p: Params, weights: np.ndarray | None = None, angles: np.nd
     """Run one episode per seed (the core's seed protocol), in parallel over seeds.
     `weights` (2, q, n) and `angles` (trials,: the paper's starts at these angles) override every
     seed's own."""
+    if p.task != CARTPOLE:
+        raise ParamError(f"the cart-pole batch engine runs task {CARTPOLE!r}, not {p.task!r}")
     if _distributor is not None and weights is None and angles is None and learn:
         return _distributor(seeds, p)
     seeds = np.asarray(list(seeds), dtype=np.int64)

@@ -16,7 +16,7 @@ NO_INPUTS = np.zeros(0, dtype=np.int64)
 
 class SuccessCounter:
     """Counts successful steps; signals a positive reward every sigma of them and a punishment on
-    failure (the paper's 1-hot reward R)."""
+    failure (the paper's 1-hot reward R; reward_mapping="goal": core.rln.outcome)."""
 
     def __init__(self, params: Params):
         self.rule = Rule.from_params(params)
@@ -25,17 +25,19 @@ class SuccessCounter:
     def begin_trial(self) -> None:
         self.count = trial_start_count(self.count, self.rule)
 
-    def outcome(self, failed: bool) -> int:
-        """The reward kind for a step's outcome: PUNISH, REWARD or NONE."""
-        kind, self.count = outcome(self.count, failed, self.rule)
+    def outcome(self, terminated: bool) -> int:
+        """The reward kind for a step's outcome (whether it terminated the episode: the
+        cart-pole's failure): PUNISH, REWARD or NONE."""
+        kind, self.count = outcome(self.count, terminated, self.rule)
         return kind
 
 
 class RLNAgent:
-    """Two RLNs with a network WTA: spikes in, action out; a reward kind in, weights updated."""
+    """One RLN per action (params.n_actions) with a network WTA: spikes in, action out; a reward
+    kind in, weights updated."""
 
     def __init__(self, params: Params, weights: np.ndarray, seed: int = 0):
-        shape = (2, params.n_segments, params.n_inputs)
+        shape = (params.n_actions, params.n_segments, params.n_inputs)
         weights = np.asarray(weights, dtype=np.float64)
         if weights.shape != shape:
             raise ValueError(f"weights must have shape {shape}, got {weights.shape}")
@@ -53,7 +55,7 @@ class RLNAgent:
 
     @property
     def weights(self) -> np.ndarray:
-        """(2, q, n_inputs), read-only: the rule alone changes them, and the decisions cached
+        """(K, q, n_inputs), read-only: the rule alone changes them, and the decisions cached
         for them stay true."""
         return self._read_only_weights
 
@@ -66,7 +68,7 @@ class RLNAgent:
 
     @property
     def punish_counter(self) -> np.ndarray:
-        """c- per synapse, (2, q, n_inputs)."""
+        """c- per synapse, (K, q, n_inputs)."""
         return counter_value(self.punish_tagged_at, self.tick, self.rule.omega)
 
     @punish_counter.setter
@@ -75,7 +77,7 @@ class RLNAgent:
 
     @property
     def reward_counter(self) -> np.ndarray:
-        """c+ per segment, (2, q)."""
+        """c+ per segment, (K, q)."""
         return counter_value(self.reward_tagged_at, self.tick, self.rule.sigma)
 
     @reward_counter.setter
@@ -117,36 +119,38 @@ class RLNAgent:
                 if rerandomize(self._weights, trial, self.rule, self.random_state):
                     self._decisions.clear()
 
-    def infer(self, spikes: np.ndarray) -> tuple[int, tuple[int, int]]:
+    def infer(self, spikes: np.ndarray) -> tuple[int, tuple[int, ...]]:
         """(winning neuron, the dendrite winner of each neuron) for a spike vector."""
-        return self._decide(np.flatnonzero(spikes))
+        neuron, segments = self._decide(np.flatnonzero(spikes))
+        return neuron, tuple(int(s) for s in segments)
 
-    def _decide(self, active: np.ndarray) -> tuple[int, tuple[int, int]]:
+    def _decide(self, active: np.ndarray) -> tuple[int, np.ndarray]:
         """infer for the spiking inputs `active`. A decision depends on the weights alone (but
         for random ties, drawn on every tie): it is kept until the weights change."""
         key = active.tobytes()
         decision = self._decisions.get(key)
         if decision is None:
             with np.errstate(over="ignore"):  # tie_break="random": the stream wraps around
-                neuron, s0, s1 = infer(self._weights, active, self.rule, self.random_state,
-                                       response_space(self.p.n_segments))
-            decision = neuron, (s0, s1)
+                segments = np.empty(self.p.n_actions, dtype=np.int64)
+                neuron = infer(self._weights, active, self.rule, self.random_state,
+                               response_space(self.p.n_actions, self.p.n_segments), segments)
+            decision = int(neuron), segments
             if self.rule.tie_break != TIE_RANDOM:
                 self._decisions[key] = decision
         return decision
 
     def act(self, spikes: np.ndarray) -> tuple[int, int]:
-        """Infer and tag the action path; returns (action = winning neuron, 0 = -F and 1 = +F,
-        its winning segment)."""
+        """Infer and tag the action path; returns (action = the acting neuron's index, e.g. 0 = -F
+        and 1 = +F on the cart-pole, its winning segment)."""
         spikes = np.asarray(spikes, dtype=np.uint8)
         active = np.flatnonzero(spikes)
         neuron, segments = self._decide(active)
         with np.errstate(over="ignore"):  # the random stream wraps around by design
-            neuron = explore(neuron, self.rule, self.random_state)
+            neuron = explore(neuron, self.p.n_actions, self.rule, self.random_state)
         self.last_spikes = spikes
         tag_action_path(self.punish_tagged_at, self.reward_tagged_at, self.eligible, neuron,
                         segments, active, self.tick, self.rule)
-        return neuron, segments[neuron]
+        return neuron, int(segments[neuron])
 
     def learn(self, kind: int) -> None:
         """Apply a reward kind (NONE, REWARD, PUNISH), then decay every counter by one."""

@@ -5,7 +5,8 @@
     cart velocity:    (-inf,-e) [-e,e) [e,+inf)                        3 inputs (e = 5 m/s in Table 1)
 
 Beyond the paper, any of the four state variables in any order (Params.state_vars), each with
-its edges as parameters (Params.edges_of). Only the interior edges matter: a value below the
+its edges as parameters (Params.edges_of), and any other task's named variables
+(core.task.Task.variables, their edges in Params.variable_edges). Only the interior edges matter: a value below the
 first edge falls in the first interval, one at or above the last in the last (the environment
 fails the trial before the angle leaves +-12 deg).
 """
@@ -18,22 +19,32 @@ from functools import cached_property
 import numpy as np
 
 from .jitable import tick_kernel
-from .params import STATE_NAMES, Params
+from .params import STATE_NAMES, Params, ParamError
 
 STATE_UNITS = ("m", "m/s", "deg", "deg/s")
 
 
 @dataclass(frozen=True)
 class Encoder:
-    """Which state components are encoded (indices into the 4-vector state) and their interior edges."""
+    """Which components of the observation are encoded (indices into its vector), their interior
+    edges, and every component's name and unit (the inputs' labels)."""
 
     components: tuple[int, ...]
     edges: tuple[tuple[float, ...], ...]
+    names: tuple[str, ...] = STATE_NAMES  # of the observation's components, in its order
+    units: tuple[str, ...] = STATE_UNITS
 
     @classmethod
-    def from_params(cls, p: Params) -> "Encoder":
-        return cls(tuple(STATE_NAMES.index(v) for v in p.state_vars),
-                   tuple(p.edges_of(v) for v in p.state_vars))
+    def from_params(cls, p: Params, names: tuple[str, ...] = STATE_NAMES,
+                    units: tuple[str, ...] = STATE_UNITS) -> "Encoder":
+        """The encoder of p.state_vars in an observation of these components (the cart-pole's
+        state, or a task's variables); ParamError where p encodes a variable it lacks."""
+        missing = [v for v in p.state_vars if v not in names]
+        if missing:
+            raise ParamError(f"state_vars: the observation has no {missing[0]!r}; it has "
+                             f"{', '.join(names)}")
+        return cls(tuple(names.index(v) for v in p.state_vars),
+                   tuple(p.edges_of(v) for v in p.state_vars), tuple(names), tuple(units))
 
     @property
     def n_inputs(self) -> int:
@@ -55,7 +66,7 @@ class Encoder:
         labels = []
         for component, edges in zip(self.components, self.edges):
             bounds = (-np.inf, *edges, np.inf)
-            name, unit = STATE_NAMES[component], STATE_UNITS[component]
+            name, unit = self.names[component], self.units[component]
             for lo, hi in zip(bounds[:-1], bounds[1:]):
                 labels.append(f"{name}[{lo:g},{hi:g}){unit}")
         return labels

@@ -11,7 +11,7 @@ and the agent applies it.
 
 Seed protocol (so that any two implementations can be compared trial by trial):
     rng = numpy.random.default_rng(seed)
-    weights = w_base + rng.uniform(0, w_range, size=(2, q, n_inputs))
+    weights = w_base + rng.uniform(0, w_range, size=(K, q, n_inputs))   (K actions: 2 here)
     initial angles = successive grid[rng.permutation(32)], concatenated, cut to `trials`.
 
 Protocol "gymnasium" (CartPole-v1's, as the RL field measures agents): trial k of seed s starts
@@ -54,7 +54,7 @@ def seed_setup(seed: int, p: Params) -> tuple[np.ndarray, np.ndarray]:
     """(initial weights, initial angles of every trial) for a seed."""
     check_seed(seed)
     rng = np.random.default_rng(seed)
-    weights = p.w_base + rng.uniform(0, p.w_range, size=(2, p.n_segments, p.n_inputs))
+    weights = p.w_base + rng.uniform(0, p.w_range, size=(p.n_actions, p.n_segments, p.n_inputs))
     grid = angle_grid(p)
     rounds = -(-p.trials // p.n_angles)
     angles = np.concatenate([grid[rng.permutation(p.n_angles)] for _ in range(rounds)])
@@ -122,26 +122,48 @@ class EpisodeResult:
     checkpoint: Checkpoint | None = None  # the state after the last trial: resume from it
 
 
+def play_trial(agent: RLNAgent, counter: SuccessCounter, encoder: Encoder, observation,
+               step: Callable[[int], tuple], max_steps: int, learn: bool = True,
+               trial: int = 0) -> tuple[int, float, bool]:
+    """Run trial `trial` of an episode of any task from `observation`, its first: every tick the
+    agent acts on the encoded observation, `step(action)` returns (observation, reward,
+    terminated, truncated) as Gymnasium's step does, the success counter turns the outcome into
+    a reward kind and the agent learns it. The trial ends when the step terminated or truncated
+    the episode, or after max_steps steps. Returns (steps taken, the rewards' sum, whether it
+    terminated)."""
+    agent.begin_trial(trial, learn)
+    counter.begin_trial()
+    steps, total = 0, 0.0
+    while steps < max_steps:
+        action, _ = agent.act(encoder.spikes(observation))
+        observation, reward, terminated, truncated = step(action)
+        total += reward
+        kind = counter.outcome(terminated)
+        if learn:
+            agent.learn(kind)
+        steps += 1
+        if terminated or truncated:
+            return steps, total, bool(terminated)
+    return steps, total, False
+
+
 def run_trial(agent: RLNAgent, counter: SuccessCounter, env: CartPole, encoder: Encoder,
               p: Params, learn: bool = True, trace: Callable[[tuple], None] | None = None,
               trial: int = 0) -> tuple[int, int]:
-    """Run trial `trial` of an episode from the state env was reset to; returns (successful
-    steps, end status). `trace` gets the state after each step."""
-    agent.begin_trial(trial, learn)
-    counter.begin_trial()
-    steps = 0
-    while steps < p.max_steps:
-        action, _ = agent.act(encoder.spikes(env.state))
+    """Run trial `trial` of a cart-pole episode from the state env was reset to; returns
+    (successful steps, end status). `trace` gets the state after each step."""
+    status = CONTINUE
+
+    def step(action: int) -> tuple:
+        nonlocal status
         status = env.step(action)
         if trace is not None:
             trace(env.state)
-        kind = counter.outcome(status != CONTINUE)
-        if learn:
-            agent.learn(kind)
-        if status != CONTINUE:
-            return steps, status
-        steps += 1
-    return steps, CONTINUE
+        return env.state, 0.0, status != CONTINUE, False
+
+    steps, _, failed = play_trial(agent, counter, encoder, env.state, step, p.max_steps, learn,
+                                  trial)
+    return steps - failed, status
 
 
 def start_episode(seed: int, p: Params, weights: np.ndarray | None = None,

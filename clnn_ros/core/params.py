@@ -11,6 +11,13 @@ from dataclasses import dataclass, field, fields
 
 PHYSICS = ("paper", "correct", "integration_slip", "gymnasium")
 PROTOCOLS = ("paper", "gymnasium")
+# What the rule's reward and punishment mean for a task (core.rln.outcome): "failure", the
+# paper's, for a task whose episode terminates in failure (a reward every sigma successful
+# steps, a punishment when it terminates); "goal", for one whose episode terminates in success
+# (reaching a goal: a reward when it terminates, a punishment every omega steps without it).
+REWARD_MAPPINGS = ("failure", "goal")
+CARTPOLE = "cartpole"  # Params.task of the paper's cart-pole and its variants
+MAX_ACTIONS = 255  # Action.winning_neuron is a uint8
 GYMNASIUM_MAX_STEPS = 500  # CartPole-v1 truncates an episode at 500 steps
 INTEGRATORS = ("semi_implicit", "euler")
 TIE_BREAKS = ("exact", "index", "random")
@@ -39,6 +46,13 @@ class ParamError(ValueError):
 @dataclass(frozen=True)
 class Params:
     """All model parameters. Defaults: Table 2 and section 3 of the paper, `paper` conventions."""
+
+    # The task (core.task): "cartpole" (the paper's, every physics below), or another task's
+    # name, e.g. "gymnasium:Acrobot-v1": its variables' edges are then variable_edges, and the
+    # cart-pole's own values (physics, limits, the paper's protocol) do not apply.
+    task: str = CARTPOLE
+    n_actions: int = 2  # one RLN per action (the cart-pole's: -F, +F)
+    reward_mapping: str = "failure"  # REWARD_MAPPINGS
 
     # Network and learning (section 3.2 and Table 2).
     nsv: int | None = None  # how many state variables are encoded; None: len(state_vars), or 1
@@ -74,6 +88,8 @@ class Params:
     # Figure 7 weights' trials under the paper's physics.
     position_edges_m: tuple = (-0.8, 0.8)
     angular_velocity_edges_deg_per_s: tuple = (-3.0, 3.0)
+    # Any other task's variables: ((name, (edges...)), ...), or text "name:e1,e2;name2:e1" (ROS).
+    variable_edges: tuple = ()
 
     # Environment (section 1.2).
     physics: str = "paper"  # "paper": the units slip that reproduces the figures; "correct": true equations
@@ -115,16 +131,22 @@ class Params:
     def __post_init__(self) -> None:
         for name in EDGE_FIELDS:
             object.__setattr__(self, name, parse_edges(getattr(self, name), name))
-        names = resolve_state_vars(self.state_vars, self.nsv)
+        object.__setattr__(self, "variable_edges", parse_variable_edges(self.variable_edges))
+        names = resolve_state_vars(self.state_vars, self.nsv,
+                                   tuple(name for name, _ in self.variable_edges))
         object.__setattr__(self, "state_vars", names)
         object.__setattr__(self, "nsv", len(names))
         self.validate()
         intervals = [len(self.edges_of(v)) + 1 for v in names]
         object.__setattr__(self, "n_inputs", sum(intervals))
-        object.__setattr__(self, "n_segments", self.segments or -(-math.prod(intervals) // 2))
+        # half the input combinations, rounded up, at most what the messages carry
+        object.__setattr__(self, "n_segments", self.segments or
+                           min(-(-math.prod(intervals) // 2), MAX_SEGMENTS))
 
     def edges_of(self, state_var: str) -> tuple[float, ...]:
         """The interior interval edges of a state variable, in its unit."""
+        if state_var not in STATE_NAMES:
+            return dict(self.variable_edges)[state_var]
         if state_var == "cart_velocity":
             return (-self.velocity_edge, self.velocity_edge)
         return {"pole_angle": self.angle_edges_deg, "cart_position": self.position_edges_m,
@@ -143,6 +165,16 @@ class Params:
         _choice("first_action", self.first_action, FIRST_ACTION)
         _choice("punish_timing", self.punish_timing, PUNISH_TIMING)
         _choice("inference", self.inference, INFERENCE)
+        _choice("reward_mapping", self.reward_mapping, REWARD_MAPPINGS)
+        if not isinstance(self.task, str) or not self.task.strip():
+            raise ParamError(f"task must be a task's name, e.g. {CARTPOLE!r}, got {self.task!r}")
+        if isinstance(self.n_actions, bool) or not isinstance(self.n_actions, int) \
+                or not 2 <= self.n_actions <= MAX_ACTIONS:
+            raise ParamError(f"n_actions must be an integer from 2 to {MAX_ACTIONS}, "
+                             f"got {self.n_actions!r}")
+        if self.task == CARTPOLE and self.n_actions != 2:
+            raise ParamError(f"the cart-pole has 2 actions (-F, +F): n_actions must be 2, "
+                             f"got {self.n_actions!r}")
         segments = self.segments
         if segments is not None and (isinstance(segments, bool) or not isinstance(segments, int)
                                      or not 1 <= segments <= MAX_SEGMENTS):
@@ -157,7 +189,8 @@ class Params:
             # Counts travel in the messages' uint32 fields (trial, successful_steps).
             if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value < 2**31:
                 raise ParamError(f"{name} must be a positive integer below 2**31, got {value!r}")
-        if self.protocol == "gymnasium" and self.max_steps != GYMNASIUM_MAX_STEPS:
+        if self.task == CARTPOLE and self.protocol == "gymnasium" and \
+                self.max_steps != GYMNASIUM_MAX_STEPS:
             raise ParamError(f"protocol gymnasium truncates a trial at {GYMNASIUM_MAX_STEPS} steps "
                              f"(CartPole-v1): max_steps must be {GYMNASIUM_MAX_STEPS}, got "
                              f"{self.max_steps!r}")
@@ -190,8 +223,8 @@ class Params:
         if self.angle_span_deg >= self.angle_limit_deg:
             raise ParamError(f"angle_span_deg ({self.angle_span_deg:g}) must be below "
                              f"angle_limit_deg ({self.angle_limit_deg:g})")
-        for name in EDGE_FIELDS:
-            edges = getattr(self, name)
+        for name, edges in [*((n, getattr(self, n)) for n in EDGE_FIELDS),
+                            *((f"variable_edges of {n}", e) for n, e in self.variable_edges)]:
             if any(b <= a for a, b in zip(edges, edges[1:])):
                 raise ParamError(f"{name} must be strictly increasing, got {list(edges)}")
         edges = self.angle_edges_deg
@@ -248,10 +281,40 @@ def parse_edges(value, name: str = "angle_edges_deg") -> tuple[float, ...]:
     return edges
 
 
-def resolve_state_vars(value, nsv) -> tuple[str, ...]:
+def parse_variable_edges(value) -> tuple[tuple[str, tuple[float, ...]], ...]:
+    """Other tasks' variables and their interior edges, from ((name, edges), ...) or text
+    "name:e1,e2;name2:e1": a tuple of (name, edges), else one ParamError line."""
+    if isinstance(value, str):
+        pairs = []
+        for part in (p.strip() for p in value.split(";")):
+            name, colon, edges = part.partition(":")
+            if not colon:
+                raise ParamError(f"variable_edges must be name:edges separated by ';', e.g. "
+                                 f"'x:-1,0,1;v:0', got {value!r}")
+            pairs.append((name.strip(), edges))
+        value = pairs
+    try:
+        pairs = tuple((name, edges) for name, edges in value)
+    except (TypeError, ValueError):
+        raise ParamError(f"variable_edges must be (name, edges) pairs, got {value!r}") from None
+    names = [name for name, _ in pairs]
+    for name in names:
+        if not isinstance(name, str) or not name.isidentifier():
+            raise ParamError(f"variable_edges: a variable's name must be a word of letters, "
+                             f"digits and _, got {name!r}")
+        if name in STATE_NAMES:
+            raise ParamError(f"variable_edges: {name} is a cart-pole variable, whose edges are "
+                             f"its own parameter (e.g. angle_edges_deg)")
+        if names.count(name) > 1:
+            raise ParamError(f"variable_edges names {name} twice")
+    return tuple((name, parse_edges(edges, f"variable_edges of {name}")) for name, edges in pairs)
+
+
+def resolve_state_vars(value, nsv, other_names: tuple[str, ...] = ()) -> tuple[str, ...]:
     """The encoded state variables from state_vars (names, or text "a,b") and nsv; one
-    ParamError line for unknown or repeated names, or an nsv that does not match."""
-    if nsv is not None and (isinstance(nsv, bool) or nsv not in range(1, 5)):
+    ParamError line for unknown or repeated names, or an nsv that does not match. Known names:
+    the cart-pole's and `other_names` (another task's, with edges in variable_edges)."""
+    if value is None and nsv is not None and (isinstance(nsv, bool) or nsv not in range(1, 5)):
         raise ParamError(f"nsv must be 1, 2, 3 or 4 (state variables encoded), got {nsv!r}")
     if value is None:
         return STATE_VAR_ORDER[:nsv or 1]
@@ -260,12 +323,14 @@ def resolve_state_vars(value, nsv) -> tuple[str, ...]:
             not all(isinstance(v, str) for v in items):
         raise ParamError(f"state_vars must be names separated by commas, got {value!r}")
     names = tuple(items)
-    unknown = [v for v in names if v not in STATE_NAMES]
+    known = (*STATE_NAMES, *other_names)
+    unknown = [v for v in names if v not in known]
     if unknown:
-        raise ParamError(f"state_vars: unknown {unknown[0]!r}; known: {', '.join(STATE_NAMES)}")
+        raise ParamError(f"state_vars: unknown {unknown[0]!r}; known: {', '.join(known)} "
+                         f"(another task's variables need their edges in variable_edges)")
     if len(set(names)) != len(names):
         raise ParamError(f"state_vars names a variable twice: {','.join(names)}")
-    if nsv is not None and nsv != len(names):
+    if nsv is not None and (isinstance(nsv, bool) or nsv != len(names)):
         raise ParamError(f"nsv ({nsv}) must be the number of state_vars ({len(names)}: "
                          f"{','.join(names)}), or not given")
     return names
@@ -307,7 +372,7 @@ def params_from_strings(values: dict[str, str], base: Params | None = None) -> P
     return base.replace(**converted)
 
 
-__all__ = ["Params", "ParamError", "params_from_strings", "protocol_defaults", "PHYSICS", "PROTOCOLS",
+__all__ = ["Params", "ParamError", "REWARD_MAPPINGS", "CARTPOLE", "MAX_ACTIONS", "params_from_strings", "protocol_defaults", "PHYSICS", "PROTOCOLS",
            "GYMNASIUM_MAX_STEPS", "INTEGRATORS", "TIE_BREAKS",
            "TAGGING", "E_FLAGS", "SUCCESS_COUNTER", "DECAY_COUNTERS", "FIRST_ACTION",
            "PUNISH_TIMING", "INFERENCE", "STATE_NAMES", "STATE_VAR_ORDER"]

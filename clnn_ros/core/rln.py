@@ -1,13 +1,15 @@
 """Reinforcement-learning neurons (RLNs) and the three-factor learning rules, sections 2.2-2.3.
 
-Two RLNs, neuron 0 drives -F and neuron 1 drives +F. Each has one dendrite of q segments; each
-segment has one synapse per encoder input. The per-synapse state is that of the paper's Figures
+One RLN per action of the task (K >= 2; the paper's cart-pole has two: neuron 0 drives -F and
+neuron 1 drives +F). Each has one dendrite of q segments; each segment has one synapse per
+encoder input. The per-synapse state is that of the paper's Figures
 5 and 6: decay counters (each kept as the tick at which it was set, see below) and e flags.
 
 Inference (every tick, section 2.2):
     segment response = sum over spiking inputs of ceil(w)      (small-integer inference;
                                                                 inference="exact": of w)
-    dendrite WTA picks each neuron's best segment, network WTA picks the neuron (the action).
+    dendrite WTA picks each neuron's best segment, network WTA over the K neurons picks the
+    neuron (the action).
     Ties (all initial weights ceil to 5) are broken by the exact un-ceiled sums, then the lowest
     index (`tie_break="exact"`); "index" skips the exact sums, "random" picks among the tied.
 
@@ -86,9 +88,9 @@ def wta(ceiled, exact, count, tie_break, random_state):
 
 
 @jitable  # it makes an array: with reference counting
-def response_space(n_segments):
+def response_space(n_neurons, n_segments):
     """Scratch space for infer: the ceiled and the exact responses of the WTA's candidates."""
-    return np.empty((2, max(n_segments, 2)))
+    return np.empty((2, max(n_segments, n_neurons)))
 
 
 @kernel
@@ -101,24 +103,29 @@ def dendrite_winner(weights, neuron, active, rule, random_state, ceiled, exact):
 
 
 @kernel
-def infer(weights, active, rule, random_state, responses):
-    """(winning neuron, dendrite winner of neuron 0, of neuron 1) for the spiking inputs
-    `active`: the dendrite WTA within each neuron, then the network WTA between the two.
+def infer(weights, active, rule, random_state, responses, segments):
+    """The winning neuron for the spiking inputs `active`: the dendrite WTA within each neuron
+    (its winner written to segments[neuron]), then the network WTA among the neurons.
     `responses`: scratch space from response_space()."""
     ceiled, exact = responses[0], responses[1]
-    s0 = dendrite_winner(weights, 0, active, rule, random_state, ceiled, exact)
-    s1 = dendrite_winner(weights, 1, active, rule, random_state, ceiled, exact)
-    ceiled[0], exact[0] = segment_response(weights, 0, s0, active, rule.ceiled)
-    ceiled[1], exact[1] = segment_response(weights, 1, s1, active, rule.ceiled)
-    return wta(ceiled, exact, 2, rule.tie_break, random_state), s0, s1
+    n_neurons = weights.shape[0]
+    for n in range(n_neurons):
+        segments[n] = dendrite_winner(weights, n, active, rule, random_state, ceiled, exact)
+    for n in range(n_neurons):
+        ceiled[n], exact[n] = segment_response(weights, n, segments[n], active, rule.ceiled)
+    return wta(ceiled, exact, n_neurons, rule.tie_break, random_state)
 
 
 @tick_kernel
-def explore(neuron, rule, random_state):
-    """The neuron that acts: the network WTA's winner, or with probability rule.explore the
-    other one (a draw on every tick only when exploring)."""
+def explore(neuron, n_neurons, rule, random_state):
+    """The neuron that acts: the network WTA's winner, or with probability rule.explore another
+    one (a draw on every tick only when exploring; with more than two neurons a second draw
+    picks which of the others, each as likely)."""
     if rule.explore > 0.0 and next_uniform(random_state) < rule.explore:
-        return 1 - neuron
+        if n_neurons == 2:
+            return 1 - neuron
+        other = int(next_uniform(random_state) * (n_neurons - 1))
+        return other + 1 if other >= neuron else other
     return neuron
 
 
@@ -183,13 +190,14 @@ def tag_segment(punish_tagged_at, reward_tagged_at, eligible, neuron, segment, a
 def tag_action_path(punish_tagged_at, reward_tagged_at, eligible, neuron, segments, active, now,
                     rule):
     """Tag the winning segment of the winning neuron (`segments`: each neuron's dendrite winner);
-    with tagging="both_neurons" also the other neuron's."""
-    # segments[neuron] as a choice between two values: compiled, a tuple indexed by a variable
-    # is a jump table, mispredicted whenever the action changes
-    winner, other = (segments[1], segments[0]) if neuron == 1 else (segments[0], segments[1])
-    tag_segment(punish_tagged_at, reward_tagged_at, eligible, neuron, winner, active, now)
+    with tagging="both_neurons" also every other neuron's."""
+    tag_segment(punish_tagged_at, reward_tagged_at, eligible, neuron, segments[neuron], active,
+                now)
     if rule.tag_both:
-        tag_segment(punish_tagged_at, reward_tagged_at, eligible, 1 - neuron, other, active, now)
+        for other in range(segments.shape[0]):
+            if other != neuron:
+                tag_segment(punish_tagged_at, reward_tagged_at, eligible, other, segments[other],
+                            active, now)
 
 
 # ---- the update after the step (section 2.3, Figure 6) -----------------------------------------
@@ -258,10 +266,20 @@ def trial_start_count(count, rule):
 
 
 @tick_kernel
-def outcome(count, failed, rule):
-    """(reward kind, new success count) for a step's outcome: PUNISH on failure, REWARD on every
-    sigma-th success (the count then restarts), NONE otherwise."""
-    if failed:
+def outcome(count, terminated, rule):
+    """(reward kind, new success count) for a step's outcome. The paper's mapping (a task that
+    terminates in failure): PUNISH when the step terminated the episode, REWARD on every
+    sigma-th success (the count then restarts), NONE otherwise. reward_mapping="goal" (a task
+    that terminates in success): REWARD when it terminated, PUNISH on every omega-th step
+    without it (the count then restarts)."""
+    if rule.reward_on_goal:
+        if terminated:
+            return REWARD, count
+        count += 1
+        if count == rule.omega:
+            return PUNISH, 0
+        return NONE, count
+    if terminated:
         return PUNISH, count
     count += 1
     if count == rule.sigma:

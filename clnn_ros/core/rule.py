@@ -39,6 +39,7 @@ class Rule(NamedTuple):
     rerandomize_fraction: float
     w_base: float
     rerandomize_range: float
+    reward_on_goal: bool  # reward_mapping="goal"
 
     @classmethod
     def from_params(cls, p: Params) -> "Rule":
@@ -48,4 +49,4 @@ class Rule(NamedTuple):
                    p.success_counter == "per_trial", p.inference == "ceiled",
                    int(p.punish_timing == "after_decay"), p.decay_counters == "per_trial",
                    float(p.explore), int(p.rerandomize_every), float(p.rerandomize_fraction),
-                   float(p.w_base), float(p.rerandomize_range))
+                   float(p.w_base), float(p.rerandomize_range), p.reward_mapping == "goal")

@@ -14,9 +14,9 @@ import yaml
 
 from ..core.gym_physics import GYM_PHYSICS
 from ..core.params import (DECAY_COUNTERS, E_FLAGS, FIRST_ACTION, INFERENCE, INTEGRATORS,
-                           MAX_SEGMENTS, PHYSICS, PROTOCOLS, PUNISH_TIMING, STATE_NAMES,
-                           SUCCESS_COUNTER, TAGGING, TIE_BREAKS, ParamError, Params,
-                           params_from_strings, protocol_defaults)
+                           MAX_ACTIONS, MAX_SEGMENTS, PHYSICS, PROTOCOLS, PUNISH_TIMING,
+                           REWARD_MAPPINGS, STATE_NAMES, SUCCESS_COUNTER, TAGGING, TIE_BREAKS,
+                           ParamError, Params, params_from_strings, protocol_defaults)
 from ..core.presets import overlay_values, preset_values
 from .names import RECORDER, TRIAL_MANAGER, clock_remappings
 
@@ -138,6 +138,16 @@ DESCRIPTIONS = {
                              (0.0, 1.0)),
     "rerandomize_range": ("re-randomization: a re-drawn weight is w_base + uniform "
                           "[0, rerandomize_range)", NON_NEGATIVE),
+    "task": ("the task: cartpole (the paper's and its variants), or another task's name, e.g. "
+             "gymnasium:Acrobot-v1 (not yet run by the graph: clnn-reproduce learn --task)", None),
+    "n_actions": ("actions of the task, one RLN each (the cart-pole's 2: -F, +F)",
+                  (2, MAX_ACTIONS)),
+    "reward_mapping": ("failure: a reward every sigma successful steps, a punishment when the "
+                       "episode terminates (the paper's); goal: a reward when it terminates (a "
+                       "goal reached), a punishment every omega steps without it",
+                       REWARD_MAPPINGS),
+    "variable_edges": ("encoder: another task's variables and their interior edges, "
+                       "name:e1,e2;name2:e1 ('' for the cart-pole)", None),
     "seed": ("the episode's seed: initial weights, initial angles", (0, 2**32 - 1)),
     "stall_timeout_s": ("seconds without progress before the graph is declared stalled",
                         POSITIVE),
