@@ -24,7 +24,7 @@ TOY = Task("toy", (Variable("a"), Variable("b")),
 
 
 def toy_params(**changes) -> Params:
-    return TOY.params(Params(variable_edges="a:0;b:-1,1", **changes))
+    return TOY.params({"variable_edges": "a:0;b:-1,1"}, Params(**changes))
 
 
 def winner(responses: list[tuple[float, float]]) -> int:
@@ -98,7 +98,7 @@ def test_bad_task_values_are_one_line(changes, message):
 
 def test_a_task_refuses_params_that_do_not_fit_it():
     with pytest.raises(ParamError, match="variable_edges has no edges for b"):
-        TOY.params(Params(variable_edges="a:0"))
+        TOY.params({"variable_edges": "a:0"})
     with pytest.raises(ParamError, match="has 3 actions"):
         TOY.check(toy_params().replace(n_actions=4))
     with pytest.raises(ParamError, match="for task 'cartpole', not 'toy'"):
@@ -109,7 +109,7 @@ def test_a_task_refuses_params_that_do_not_fit_it():
 
 def test_the_encoder_labels_a_tasks_inputs_by_its_names_and_units():
     task = Task("t", (Variable("speed", "m/s"), Variable("gap", "m")), TOY.actions)
-    p = task.params(Params(variable_edges="speed:0;gap:1,2"))
+    p = task.params({"variable_edges": "speed:0;gap:1,2"})
     encoder = Encoder.from_params(p, task.names, task.units)
     assert encoder.labels() == ["speed[-inf,0)m/s", "speed[0,inf)m/s", "gap[-inf,1)m",
                                 "gap[1,2)m", "gap[2,inf)m"]
@@ -197,3 +197,48 @@ def test_an_unknown_tasks_components_are_numbered():
     assert task.names == ("x0", "x1", "x2") and task.reward_threshold is None
     assert task.variables[2].high == pytest.approx(8.0)
     assert gymnasium_task.env_id(task.name) == "Pendulum-v1"
+
+
+def test_learn_a_gymnasium_task_from_the_command_line(tmp_path, capsys):
+    from clnn_ros.reproduce.__main__ import main
+
+    assert main(["learn", "--task", "gymnasium:MountainCar-v0", "--seeds", "0,2", "--trials", "3",
+                 "--option", "sigma=64", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "solved gymnasium:MountainCar-v0 (last 100 returns averaging -110 or more): 0 of 2" \
+        in out
+    rows = (tmp_path / "learn_MountainCar-v0.csv").read_text().splitlines()
+    assert rows[0] == "seed,trial,steps,return,terminated" and len(rows) == 1 + 2 * 3
+    task, env = make("gymnasium:MountainCar-v0")
+    core = run_task_episode(2, task_params(task, {"trials": "3", "sigma": "64"}), task, env)
+    assert rows[4:] == [f"2,{t},{core.steps[t]},{float(core.returns[t])!r},"
+                        f"{int(core.terminated[t])}"
+                        for t in range(3)]
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--task", "gymnasium:Acrobot-v1", "--physics", "correct"], "--physics is for the cart-pole"),
+    (["--task", "gymnasium:Acrobot-v1", "--preset", "escape"], "--preset is for the cart-pole"),
+    (["--actions=-1,1"], "--actions goes with --task gymnasium:ID"),
+    (["--task", "Acrobot"], "a Gymnasium task is named gymnasium:ID"),
+    (["--task", "gymnasium:Acrobot-v1", "--option", "n_actions=2"], "has 3 actions"),
+])
+def test_learn_refuses_what_a_task_cannot_take_in_one_line(argv, message, tmp_path, capsys):
+    from clnn_ros.reproduce.__main__ import main
+
+    assert main(["learn", *argv, "--trials", "1", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and "\n" not in err
+
+
+@pytest.mark.parametrize("option", ["task=gymnasium:Acrobot-v1", "reward_mapping=goal",
+                                    "variable_edges=a:0"])
+def test_the_graph_refuses_task_values_it_does_not_carry_yet_in_one_line(option):
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-m", "clnn_ros.run_all", "--option", option,
+                           "--trials", "1"], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and done.stdout == ""
+    assert done.stderr.count("\n") == 1 and "the graph runs the cart-pole" in done.stderr \
+        and done.stderr.startswith(f"run_all: error: {option.split('=')[0]}:")

@@ -12,15 +12,15 @@ SOLVED_MEAN = 475  # CartPole-v1's reward threshold
 WINDOW = 100         # episodes averaged
 
 
-def solved_episode(returns) -> int | None:
-    """The number of episodes (1-based) after which the last WINDOW average SOLVED_MEAN or more;
-    None if that never happened."""
+def solved_episode(returns, threshold: float = SOLVED_MEAN) -> int | None:
+    """The number of episodes (1-based) after which the last WINDOW average `threshold` (the
+    task's; CartPole-v1's SOLVED_MEAN) or more; None if that never happened."""
     returns = np.asarray(returns, dtype=np.float64)
     if len(returns) < WINDOW:
         return None
     # Integer returns: the window sums are exact, and so is the comparison.
     sums = np.convolve(returns, np.ones(WINDOW), "valid")
-    hits = np.flatnonzero(sums >= SOLVED_MEAN * WINDOW)
+    hits = np.flatnonzero(sums >= threshold * WINDOW)
     return int(hits[0]) + WINDOW if len(hits) else None
 
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .params import CARTPOLE, STATE_NAMES, ParamError, Params
+from .params import CARTPOLE, STATE_NAMES, ParamError, Params, params_from_strings
 
 ENDS_IN = ("failure", "success")  # what a terminated episode means
 REWARD_MAPPING_OF = {"failure": "failure", "success": "goal"}  # ends_in -> Params.reward_mapping
@@ -77,29 +77,30 @@ class Task:
     def action_labels(self) -> tuple[str, ...]:
         return tuple(a.label for a in self.actions)
 
-    def params(self, p: Params | None = None) -> Params:
-        """p (default: the paper's values) made this task's: its name, its actions, its
-        truncation, the reward mapping of how its episodes end, and every variable encoded
-        where p encodes the cart-pole's (then each needs its edges in p.variable_edges).
-        ParamError with one line where p does not fit it."""
-        p = p or Params()
-        if self.name == CARTPOLE:
-            return p
-        changes = dict(task=self.name, n_actions=len(self.actions),
+    def params(self, values: dict[str, str] | None = None, base: Params | None = None) -> Params:
+        """`base` (default: the paper's values) made this task's (its name, its actions, its
+        truncation, the reward mapping of how its episodes end), then `values` (text, as a
+        command gives them) over it; every variable of the task encoded where p still encodes
+        the cart-pole's (each then needs its edges in variable_edges). ParamError with one line
+        where the result does not fit the task."""
+        p = base or Params()
+        if self.name != CARTPOLE:
+            own = dict(task=self.name, n_actions=len(self.actions),
                        reward_mapping=REWARD_MAPPING_OF[self.ends_in])
-        if self.max_steps is not None:
-            changes["max_steps"] = self.max_steps
-        if all(v in STATE_NAMES for v in p.state_vars):
-            changes["state_vars"] = self.names
-        encoded = changes.get("state_vars", p.state_vars)
-        edged = {name for name, _ in p.variable_edges}
-        missing = [v for v in encoded if v not in edged]
-        if missing:
-            bounds = {v.name: (v.low, v.high) for v in self.variables}
-            raise ParamError(f"task {self.name}: variable_edges has no edges for {missing[0]} "
-                             f"(bounds {bounds.get(missing[0])}), e.g. "
-                             f"--option variable_edges='{missing[0]}:-1,0,1'")
-        return p.replace(**changes)
+            p = p.replace(**own, **({} if self.max_steps is None else
+                                    {"max_steps": self.max_steps}))
+        p = params_from_strings(values or {}, p)
+        if self.name != CARTPOLE and all(v in STATE_NAMES for v in p.state_vars):
+            edged = {name for name, _ in p.variable_edges}
+            missing = [v for v in self.variables if v.name not in edged]
+            if missing:
+                raise ParamError(f"task {self.name}: variable_edges has no edges for "
+                                 f"{missing[0].name} (bounds {missing[0].low:g} to "
+                                 f"{missing[0].high:g}), e.g. "
+                                 f"--option variable_edges='{missing[0].name}:-1,0,1'")
+            p = p.replace(state_vars=self.names)
+        self.check(p)
+        return p
 
     def check(self, p: Params) -> None:
         """ParamError with one line where p is not for this task."""

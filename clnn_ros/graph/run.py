@@ -76,6 +76,9 @@ ENVIRONMENT_GIVEN = ("tau", *PHYSICS_PARAMETERS, "max_steps", "marker_period_tic
 # The recorder keeps every value of the run in its bag.
 NODE_PARAMETERS[RECORDER] = tuple(sorted({*Params().to_dict(), *RUN_SETTINGS}))
 
+# The core's task-neutral values (core.task) that the graph's nodes and messages do not carry yet
+NOT_YET_IN_THE_GRAPH = ("task", "n_actions", "reward_mapping", "variable_edges")
+
 COUNT = (1, 2**31 - 1)  # counts travel in the messages' uint32 fields
 POSITIVE = (0.0, sys.float_info.max)  # > 0 (Params refuses 0)
 NON_NEGATIVE = (0.0, sys.float_info.max)
@@ -285,6 +288,10 @@ def run_values(defaults: dict, preset: str | None = None, params_file: Path | No
             raise ParamError(f"{name} is set by run_all ({option}), not as a parameter")
     model = {k: v for k, v in values.items() if k not in RUN_SETTINGS}
     params = params_from_strings(model)  # raises ParamError with one line
+    if changed := [name for name in NOT_YET_IN_THE_GRAPH if name in model and
+                   getattr(params, name) != getattr(Params(), name)]:
+        raise ParamError(f"{changed[0]}: the graph runs the cart-pole with the paper's reward "
+                         f"mapping for now; other tasks: clnn-reproduce learn --task")
     # The nodes get the checked values: rcl refuses e.g. a list mixing ints and floats.
     values.update({k: list(v) if isinstance(v, tuple) else v
                    for k, v in params.to_dict().items() if k in model})

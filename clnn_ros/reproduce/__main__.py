@@ -30,16 +30,17 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from ..cli import OneLineArgumentParser
-from ..core.params import (PROTOCOLS, STATE_NAMES, ParamError, Params, params_from_strings,
-                           protocol_defaults)
-from ..core.presets import PRESETS, overlay_values, preset_values
+from ..core.params import CARTPOLE, ParamError, Params
+from ..core.presets import PRESETS
+from .arguments import add_model_flags, add_task_flags, learn_params, task_values
 from .calibration import calibrate, print_calibration, write_calibration
 from .cluster import ClusterError
-from .common import DEFAULT_SEEDS, LITERAL_EDGE, TRIALS, executed_by, parse_seeds, stuck
+from .common import DEFAULT_SEEDS, TRIALS, executed_by, parse_seeds, stuck
 from .figures import figures_markdown, make_figures
 from .gym_eval import RESET_STRIDE, gym_eval, load_learn_output, print_gym_eval, write_gym_eval
 from .gymnasium_physics import SELECT_SEEDS, gymnasium_markdown, gymnasium_study, write_gymnasium
 from .learning import encodings, learn_run, paper_runs, print_seed_means, write_learn_outputs
+from .task_learning import learn_task, print_task_summary, write_task_outputs
 from .open_choices import OPTION_SEEDS, open_choices, open_choices_markdown, write_open_choices
 from .local_optima import (LOCAL_OPTIMA_SEEDS, local_optima, local_optima_markdown,
                            plot_local_optima, write_local_optima)
@@ -55,43 +56,7 @@ from .goals import REPORT_SEEDS, SELECT_SEEDS as GOAL_SELECT_SEEDS, PLAY_EPISODE
 from .report import claims_markdown, data_files_markdown, header_markdown, write_report
 from .versus import AGENTS, DEEP, FIRST_SEEDS, check_agents, run_versus, write_versus
 
-PRESET_HELP = ("a named set of parameter values (" + ", ".join(PRESETS) + "; the command "
-               "'presets' lists them) that the other flags and --options override")
 LOCAL_RAY = "local"  # --ray without an address: a Ray instance of this machine's own
-OWN_FLAGS = {"nsv": "--nsv", "state_vars": "--state-vars", "trials": "--trials",
-             "velocity_edge": "--velocity-edge",
-             "physics": "--physics", "protocol": "--protocol"}  # Params fields `learn` sets
-# with a flag, not --option
-
-
-def learn_params(args) -> Params:
-    """The preset's values (the command's default trials under them), then the command's own
-    flags and --options on top."""
-    values = {"trials": str(TRIALS)}
-    if args.preset is not None:
-        values = overlay_values(values, preset_values(args.preset))
-    given = {}
-    if args.trials is not None:
-        given["trials"] = str(args.trials)
-    if args.nsv is not None:
-        given["nsv"] = str(args.nsv)
-    if args.state_vars is not None:
-        given["state_vars"] = args.state_vars
-    if args.velocity_edge is not None:
-        given["velocity_edge"] = args.velocity_edge
-    if args.physics is not None:
-        given["physics"] = args.physics
-    if args.protocol is not None:
-        given["protocol"] = args.protocol
-    for item in args.option:
-        key, sep, value = item.partition("=")
-        key = key.strip()
-        if not sep or not key:
-            raise ValueError(f"--option expects key=value, got {item!r}")
-        if key in OWN_FLAGS:
-            raise ValueError(f"set {key} with {OWN_FLAGS[key]}, not --option")
-        given[key] = value.strip()
-    return params_from_strings(protocol_defaults(overlay_values(values, given)))
 
 
 def add_cluster_flags(parser: argparse.ArgumentParser) -> None:
@@ -132,6 +97,14 @@ def cmd_calibrate(args) -> None:
 
 def cmd_learn(args) -> None:
     seeds = parse_seeds(args.seeds)
+    if args.task != CARTPOLE:
+        task_run = learn_task(args.task, args.actions, seeds, task_values(args), Params())
+        files = write_task_outputs(task_run, Path(args.out))
+        print_task_summary(task_run)
+        print("wrote " + ", ".join(str(f) for f in files))
+        return
+    if args.actions is not None:
+        raise ValueError("--actions goes with --task gymnasium:ID")
     p = learn_params(args)
     with executor(args):
         run = learn_run(f"{p.nsv}sv", f"{p.nsv} SV", seeds, p, Path(args.out) / "runs", log)
@@ -267,24 +240,8 @@ def build_parser() -> argparse.ArgumentParser:
     c.set_defaults(func=cmd_calibrate)
 
     ln = sub.add_parser("learn", help="learning episodes with the batch engine, CSV + NPZ out")
-    ln.add_argument("--nsv", type=int, choices=(1, 2, 3, 4),
-                    help="state variables: 1 (angle, the default), 2 (and cart velocity), 3 (and "
-                         "cart position), 4 (and pole angular velocity)")
-    ln.add_argument("--state-vars", metavar="NAMES",
-                    help="the encoded state variables instead, in input order, of: "
-                         + ", ".join(STATE_NAMES))
-    ln.add_argument("--seeds", default=DEFAULT_SEEDS, help="seeds, e.g. 0-31, 0,3,5 or 0-3,7")
-    ln.add_argument("--preset", metavar="NAME", help=PRESET_HELP)
-    ln.add_argument("--trials", type=int, help=f"trials per episode (default {TRIALS})")
-    ln.add_argument("--velocity-edge", type=str, default=None,
-                    help=f"velocity edge in m/s (default: Table 1's {LITERAL_EDGE:g})")
-    ln.add_argument("--physics", default=None,
-                    help="paper (default), correct, integration_slip or gymnasium")
-    ln.add_argument("--protocol", choices=PROTOCOLS, default=None,
-                    help="paper (default: 32 start angles, the cart at rest) or gymnasium "
-                         "(CartPole-v1's: random starts, truncated at 500 steps)")
-    ln.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
-                    help="any other Params field, e.g. tie_break=index (repeatable)")
+    add_model_flags(ln, "any other Params field, e.g. tie_break=index (repeatable)")
+    add_task_flags(ln)
     ln.add_argument("--out", default="out/learn",
                     help="folder for learn_<n>sv.csv and weights; finished units are kept in "
                          "OUT/runs/ and not run again (an interrupted run resumes)")
@@ -296,19 +253,7 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--param", action="append", default=[], metavar="NAME=V1,V2,...",
                     help="a model parameter and its values (repeatable: the grid is every "
                          "combination)")
-    sw.add_argument("--nsv", type=int, choices=(1, 2, 3, 4), help="state variables (default 1)")
-    sw.add_argument("--state-vars", metavar="NAMES", help="the encoded state variables instead")
-    sw.add_argument("--seeds", default=DEFAULT_SEEDS, help="seeds, e.g. 0-31")
-    sw.add_argument("--preset", metavar="NAME", help=PRESET_HELP)
-    sw.add_argument("--trials", type=int, help=f"trials per episode (default {TRIALS})")
-    sw.add_argument("--velocity-edge", type=str, default=None, help="velocity edge in m/s")
-    sw.add_argument("--physics", default=None,
-                    help="paper (default), correct, integration_slip or gymnasium")
-    sw.add_argument("--protocol", choices=PROTOCOLS, default=None,
-                    help="paper (default: 32 start angles, the cart at rest) or gymnasium "
-                         "(CartPole-v1's: random starts, truncated at 500 steps)")
-    sw.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
-                    help="any other Params field, fixed for the whole grid")
+    add_model_flags(sw, "any other Params field, fixed for the whole grid")
     sw.add_argument("--out", default="out/sweep",
                     help="folder for the CSV files, figure, summary; finished units are "
                          "kept in OUT/runs/ and not run again (an interrupted sweep resumes)")

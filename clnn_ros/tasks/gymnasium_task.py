@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.params import ParamError, Params, params_from_strings
+from ..core.params import ParamError, Params
 from ..core.task import Action, Task, Variable
 
 PREFIX = "gymnasium:"
@@ -173,8 +173,7 @@ def task_actions(task_name: str, space, declared: str | None, known: Known | Non
 
 def task_params(task: Task, values: dict[str, str] | None = None,
                 base: Params | None = None) -> Params:
-    """The Params of a Gymnasium task: the known task's first encoding, then `values` (text, as
-    a command's options give them) over `base`, made the task's (Task.params)."""
+    """The Params of a Gymnasium task (Task.params): the known task's first encoding, then
+    `values` (text, as a command's options give them), over `base` made the task's."""
     known = KNOWN.get(env_id(task.name))
-    given = {**dict(known.defaults if known else ()), **(values or {})}
-    return task.params(params_from_strings(given, base))
+    return task.params({**dict(known.defaults if known else ()), **(values or {})}, base)

@@ -1,0 +1,82 @@
+"""Learning any task but the cart-pole (`clnn-reproduce learn --task gymnasium:ID`): each seed's
+episode with the pure core (core.task_episode) in the task's own environment, seed after seed
+(the batch engine is the cart-pole's). Judged as the field judges the task: solved at the first
+episode whose last 100 returns average the task's threshold or more."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..core.params import Params
+from ..core.solving import WINDOW, solved_episode
+from ..core.task import Task
+from ..core.task_episode import TaskEpisodeResult, run_task_episode
+from ..tasks.gymnasium_task import env_id, make, task_params
+from .common import progress, write_csv
+
+
+@dataclass
+class TaskRun:
+    task: Task
+    params: Params
+    episodes: list[TaskEpisodeResult]  # one per seed
+
+    @property
+    def name(self) -> str:
+        return env_id(self.task.name)
+
+
+def learn_task(task_name: str, actions: str | None, seeds, values: dict[str, str],
+               base: Params) -> TaskRun:
+    """Every seed's episode of the task, its Params the task's first encoding, then `values`
+    over `base`."""
+    task, _ = make(task_name, actions)
+    p = task_params(task, values, base)
+    episodes = [run_task_episode(int(seed), p, task, make(task_name, actions)[1])
+                for seed in progress(list(seeds), env_id(task_name))]
+    return TaskRun(task, p, episodes)
+
+
+def write_task_outputs(run: TaskRun, out: Path) -> list[Path]:
+    """learn_<task>.csv (a row per trial) and final_weights_<task>.npz."""
+    rows = ([e.seed, trial, int(e.steps[trial]), repr(float(e.returns[trial])),
+             int(e.terminated[trial])] for e in run.episodes for trial in range(len(e.steps)))
+    out.mkdir(parents=True, exist_ok=True)
+    npz = out / f"final_weights_{run.name}.npz"
+    np.savez_compressed(npz, seeds=[e.seed for e in run.episodes],
+                        final_weights=np.array([e.final_weights for e in run.episodes]),
+                        steps=np.array([e.steps for e in run.episodes]),
+                        returns=np.array([e.returns for e in run.episodes]),
+                        terminated=np.array([e.terminated for e in run.episodes]),
+                        task=run.task.name, params=json.dumps(run.params.to_dict()))
+    return [write_csv(out / f"learn_{run.name}.csv",
+                      ["seed", "trial", "steps", "return", "terminated"], rows), npz]
+
+
+def print_task_summary(run: TaskRun) -> None:
+    task, threshold = run.task, run.task.reward_threshold
+    print(f"{task.name}: {len(run.episodes)} seeds x {run.params.trials} episodes; "
+          f"{len(task.actions)} actions ({', '.join(task.action_labels)}); encoded: "
+          f"{', '.join(run.params.state_vars)}; reward mapping {run.params.reward_mapping}")
+    print(f"{'seed':>6s} {'mean return':>12s} {'last 100':>10s} {'solved at':>10s}")
+    solved = []
+    for e in run.episodes:
+        episode = None if threshold is None else solved_episode(e.returns, threshold)
+        if episode is not None:
+            solved.append((episode, int(e.steps[:episode].sum())))
+        print(f"{e.seed:6d} {e.returns.mean():12.1f} {e.returns[-WINDOW:].mean():10.1f} "
+              f"{'-' if episode is None else episode:>10}")
+    if threshold is None:
+        print(f"{task.name} has no reward threshold: no seed is judged solved")
+        return
+    line = (f"solved {task.name} (last {WINDOW} returns averaging {threshold:g} or more): "
+            f"{len(solved)} of {len(run.episodes)} seeds")
+    if solved:
+        episodes, steps = np.array(solved).T
+        line += (f"; episodes to solve: median {np.median(episodes):g}; environment steps: "
+                 f"median {np.median(steps):,.0f}")
+    print(line)
