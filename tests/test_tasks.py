@@ -96,6 +96,16 @@ def test_bad_task_values_are_one_line(changes, message):
     assert "\n" not in str(error.value)
 
 
+def test_variable_edges_as_text_round_trip_and_empty_text_is_none():
+    from clnn_ros.core.params import variable_edges_text
+
+    p = Params(variable_edges=(("a", (0.1, 2)), ("b", [-1])))
+    assert p.variable_edges == (("a", (0.1, 2.0)), ("b", (-1.0,)))
+    assert variable_edges_text(p.variable_edges) == "a:0.1,2.0;b:-1.0"
+    assert Params(variable_edges=variable_edges_text(p.variable_edges)) == p
+    assert Params(variable_edges="").variable_edges == () == Params(variable_edges=" ").variable_edges
+
+
 def test_a_task_refuses_params_that_do_not_fit_it():
     with pytest.raises(ParamError, match="variable_edges has no edges for b"):
         TOY.params({"variable_edges": "a:0"})

@@ -286,7 +286,7 @@ def parse_variable_edges(value) -> tuple[tuple[str, tuple[float, ...]], ...]:
     "name:e1,e2;name2:e1": a tuple of (name, edges), else one ParamError line."""
     if isinstance(value, str):
         pairs = []
-        for part in (p.strip() for p in value.split(";")):
+        for part in (p.strip() for p in value.split(";") if value.strip()):
             name, colon, edges = part.partition(":")
             if not colon:
                 raise ParamError(f"variable_edges must be name:edges separated by ';', e.g. "
@@ -308,6 +308,12 @@ def parse_variable_edges(value) -> tuple[tuple[str, tuple[float, ...]], ...]:
         if names.count(name) > 1:
             raise ParamError(f"variable_edges names {name} twice")
     return tuple((name, parse_edges(edges, f"variable_edges of {name}")) for name, edges in pairs)
+
+
+def variable_edges_text(pairs: tuple) -> str:
+    """variable_edges as text, "name:e1,e2;name2:e1" ("" for none): what parse_variable_edges
+    takes, and a ROS parameter can hold (it has no list of lists)."""
+    return ";".join(f"{name}:{','.join(repr(e) for e in edges)}" for name, edges in pairs)
 
 
 def resolve_state_vars(value, nsv, other_names: tuple[str, ...] = ()) -> tuple[str, ...]:

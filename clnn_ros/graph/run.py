@@ -16,7 +16,8 @@ from ..core.gym_physics import GYM_PHYSICS
 from ..core.params import (DECAY_COUNTERS, E_FLAGS, FIRST_ACTION, INFERENCE, INTEGRATORS,
                            MAX_ACTIONS, MAX_SEGMENTS, PHYSICS, PROTOCOLS, PUNISH_TIMING,
                            REWARD_MAPPINGS, STATE_NAMES, SUCCESS_COUNTER, TAGGING, TIE_BREAKS,
-                           ParamError, Params, params_from_strings, protocol_defaults)
+                           ParamError, Params, params_from_strings, protocol_defaults,
+                           variable_edges_text)
 from ..core.presets import overlay_values, preset_values
 from .names import RECORDER, TRIAL_MANAGER, clock_remappings
 
@@ -267,7 +268,8 @@ def node_parameters(run: dict, node: str, own: dict | None = None) -> tuple[Para
 def declared_values(params: Params, settings: dict, node: str) -> dict:
     """The values a node shows as its ROS parameters: those it uses, as it uses them (segments
     not given: the count its network has; a ROS parameter has no null value)."""
-    model = {**params.to_dict(), "segments": params.n_segments}
+    model = {**params.to_dict(), "segments": params.n_segments,
+             "variable_edges": variable_edges_text(params.variable_edges)}
     values = {name: model[name] for name in NODE_PARAMETERS[node] if name in model}
     return {**values, **settings}
 
