@@ -224,6 +224,14 @@ def test_learn_a_gymnasium_task_from_the_command_line(tmp_path, capsys):
     assert rows[4:] == [f"2,{t},{core.steps[t]},{float(core.returns[t])!r},"
                         f"{int(core.terminated[t])}"
                         for t in range(3)]
+    # each seed's result is kept: a second run runs none and writes the same
+    stored = sorted((tmp_path / "runs").iterdir())
+    assert len(stored) == 2
+    mtimes = [path.stat().st_mtime_ns for path in stored]
+    assert main(["learn", "--task", "gymnasium:MountainCar-v0", "--seeds", "0,2", "--trials", "3",
+                 "--option", "sigma=64", "--out", str(tmp_path), "--workers", "1"]) == 0
+    assert [path.stat().st_mtime_ns for path in sorted((tmp_path / "runs").iterdir())] == mtimes
+    assert (tmp_path / "learn_MountainCar-v0.csv").read_text().splitlines() == rows
 
 
 @pytest.mark.parametrize("argv, message", [
@@ -232,6 +240,7 @@ def test_learn_a_gymnasium_task_from_the_command_line(tmp_path, capsys):
     (["--actions=-1,1"], "--actions goes with --task gymnasium:ID"),
     (["--task", "Acrobot"], "a Gymnasium task is named gymnasium:ID"),
     (["--task", "gymnasium:Acrobot-v1", "--option", "n_actions=2"], "has 3 actions"),
+    (["--task", "gymnasium:Acrobot-v1", "--workers", "0"], "--workers must be at least 1"),
 ])
 def test_learn_refuses_what_a_task_cannot_take_in_one_line(argv, message, tmp_path, capsys):
     from clnn_ros.reproduce.__main__ import main

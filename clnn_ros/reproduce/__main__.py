@@ -98,7 +98,8 @@ def cmd_calibrate(args) -> None:
 def cmd_learn(args) -> None:
     seeds = parse_seeds(args.seeds)
     if args.task != CARTPOLE:
-        task_run = learn_task(args.task, args.actions, seeds, task_values(args), Params())
+        task_run = learn_task(args.task, args.actions, seeds, task_values(args), Params(),
+                              Path(args.out) / "runs", args.workers or os.cpu_count() or 1)
         files = write_task_outputs(task_run, Path(args.out))
         print_task_summary(task_run)
         print("wrote " + ", ".join(str(f) for f in files))

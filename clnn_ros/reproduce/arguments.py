@@ -69,7 +69,7 @@ def add_task_flags(parser: argparse.ArgumentParser) -> None:
                         help=f"{CARTPOLE} (the default: the paper's, with the batch engine), or "
                              "gymnasium:ID, any registered Gymnasium task with a Box observation "
                              "and Discrete actions, e.g. gymnasium:Acrobot-v1 (the pure core, "
-                             "seed after seed)")
+                             "its seeds in --workers processes, default one per CPU)")
     parser.add_argument("--actions", metavar="V1,V2,...",
                         help="with --task gymnasium:ID of a Box action space: the values the "
                              "agent may apply, e.g. -3,3 (one RLN each)")
@@ -81,6 +81,8 @@ def task_values(args) -> dict[str, str]:
     refused = [OWN_FLAGS[name] for name in CARTPOLE_FLAGS if getattr(args, name) is not None]
     refused += [flag for flag, value in (("--preset", args.preset), ("--ray", args.ray))
                 if value is not None]
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers must be at least 1, got {args.workers}")
     if refused:
         raise ValueError(f"{refused[0]} is for the cart-pole, not --task {args.task}")
     return {"trials": str(TRIALS), **given_values(args)}

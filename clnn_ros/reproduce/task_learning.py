@@ -1,6 +1,6 @@
 """Learning any task but the cart-pole (`clnn-reproduce learn --task gymnasium:ID`): each seed's
-episode with the pure core (core.task_episode) in the task's own environment, seed after seed
-(the batch engine is the cart-pole's). Judged as the field judges the task: solved at the first
+episode with the pure core (core.task_episode) in the task's own environment, the seeds shared
+out to worker processes (the batch engine is the cart-pole's). Judged as the field judges the task: solved at the first
 episode whose last 100 returns average the task's threshold or more."""
 
 from __future__ import annotations
@@ -16,7 +16,8 @@ from ..core.solving import WINDOW, solved_episode
 from ..core.task import Task
 from ..core.task_episode import TaskEpisodeResult, run_task_episode
 from ..tasks.gymnasium_task import env_id, make, task_params
-from .common import progress, write_csv
+from .common import load_stored, progress, store_arrays, store_path, write_csv
+from .workers import in_workers
 
 
 @dataclass
@@ -31,14 +32,31 @@ class TaskRun:
 
 
 def learn_task(task_name: str, actions: str | None, seeds, values: dict[str, str],
-               base: Params) -> TaskRun:
+               base: Params, store: Path, workers: int) -> TaskRun:
     """Every seed's episode of the task, its Params the task's first encoding, then `values`
-    over `base`."""
+    over `base`; the seeds run in `workers` processes, each one's result kept in `store` as
+    it finishes (a seed stored there is not run again: an interrupted run resumes)."""
     task, _ = make(task_name, actions)
     p = task_params(task, values, base)
-    episodes = [run_task_episode(int(seed), p, task, make(task_name, actions)[1])
-                for seed in progress(list(seeds), env_id(task_name))]
-    return TaskRun(task, p, episodes)
+    paths = {int(seed): store_path(store, f"{env_id(task_name)}_seed_{seed}",
+                                   [task_name, actions, p.to_dict(), int(seed)])
+             for seed in seeds}
+    results = {seed: load_stored(path) for seed, path in paths.items() if path.exists()}
+    todo = [(task_name, actions, p, seed) for seed in paths if seed not in results]
+    if todo:
+        finished = in_workers(task_seed, todo, workers)
+        for (_, _, _, seed), arrays in progress(finished, env_id(task_name)):
+            results[seed] = arrays
+            store_arrays(paths[seed], arrays)
+    return TaskRun(task, p, [TaskEpisodeResult(seed, **results[seed]) for seed in paths])
+
+
+def task_seed(task_name: str, actions: str | None, p: Params, seed: int) -> dict:
+    """One seed's episode of the task (in a worker process), as arrays."""
+    task, env = make(task_name, actions)
+    result = run_task_episode(seed, p, task, env)
+    return dict(steps=result.steps, returns=result.returns, terminated=result.terminated,
+                final_weights=result.final_weights)
 
 
 def write_task_outputs(run: TaskRun, out: Path) -> list[Path]:

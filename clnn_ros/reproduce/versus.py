@@ -14,9 +14,6 @@ an interrupted run resumes. ppo, dqn and dqn_4x need the baselines extra (pip in
 
 from __future__ import annotations
 
-import concurrent.futures
-import multiprocessing
-import signal
 import time
 from pathlib import Path
 
@@ -30,6 +27,7 @@ from ..core.presets import preset_values
 from ..core.solving import SOLVED_MEAN, WINDOW, solved_episode
 from .common import load_stored, md_table, progress, store_arrays, store_path, write_csv
 from .gym_eval import GYM_ID, FrozenPolicy, frozen, play, reset_seed
+from .workers import in_workers
 
 AGENTS = {
     "rln": "RLN agent, preset cartpole_v1 (the batch engine)",
@@ -148,31 +146,12 @@ def run_versus(agents: list[str], seeds: list[int], store: Path, workers: int,
                                         cpu_s=np.float64(cpu_s),
                                         play=frozen_play(policy.action, seed))
             store_arrays(path, results["rln"][seed])
-    others = [job for job in pending if job[0] != "rln"]
+    others = {(agent, seed): path for agent, seed, path in pending if agent != "rln"}
     if others:
-        # Ctrl-C reaches the terminal's whole process group: the workers start with SIGINT
-        # blocked (a child inherits the mask), so that this process alone takes it, ends them
-        # at once (a DQN seed takes a minute) and says it in one line; what was stored stays.
-        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-        try:
-            pool = concurrent.futures.ProcessPoolExecutor(
-                workers, mp_context=multiprocessing.get_context("spawn"))
-            futures = {pool.submit(one_seed, agent, seed): (agent, seed, path)
-                       for agent, seed, path in others}
-        finally:
-            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
-        try:
-            done = concurrent.futures.as_completed(futures)
-            for future in progress(done, f"versus: {len(others)} agent-seeds"):
-                agent, seed, path = futures[future]
-                results[agent][seed] = future.result()
-                store_arrays(path, results[agent][seed])
-        except BaseException:
-            for worker in multiprocessing.active_children():
-                worker.terminate()
-            raise
-        finally:
-            pool.shutdown(cancel_futures=True)
+        finished = in_workers(one_seed, others, workers)
+        for (agent, seed), result in progress(finished, f"versus: {len(others)} agent-seeds"):
+            results[agent][seed] = result
+            store_arrays(others[agent, seed], result)
     return results
 
 
