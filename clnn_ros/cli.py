@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import signal
+import threading
+from contextlib import contextmanager
 
 
 class OneLineArgumentParser(argparse.ArgumentParser):
@@ -16,3 +19,26 @@ class OneLineArgumentParser(argparse.ArgumentParser):
 
     def error(self, message):
         self.exit(2, f"{self.name}: error: {message}\n")
+
+
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread: a command ends as on Ctrl-C (its worker processes
+    ended, what it stored kept) instead of dying at once and leaving its workers orphaned."""
+
+
+def raise_terminated(signum, frame) -> None:
+    raise Terminated
+
+
+@contextmanager
+def sigterm_raises():
+    """Within: SIGTERM raises Terminated in the main thread (called in another, nothing
+    changes: only the main thread sets handlers)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, raise_terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)

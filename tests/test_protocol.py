@@ -2,6 +2,7 @@
 for bit, the protocol's starts are Gymnasium's reset() draws, and an episode on Gymnasium itself
 equals the batch engine's on the core's physics, trial by trial and in the final weights."""
 
+import contextlib
 import csv
 import math
 import os
@@ -223,9 +224,15 @@ def as_in_a_terminal() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
-def test_versus_ctrl_c_ends_at_once_in_one_line_and_keeps_what_was_stored(tmp_path):
-    """Ctrl-C (SIGINT to the terminal's whole process group, workers included): exit 130 with
-    one line, no worker left running, every agent-seed stored before it readable."""
+@pytest.mark.parametrize("stop, to_group, code, line", [
+    (signal.SIGINT, True, 130, "interrupted"),  # Ctrl-C: the terminal's whole process group
+    (signal.SIGTERM, False, 143, "terminated"),  # kill PID: the main process alone
+])
+def test_versus_stopped_ends_at_once_in_one_line_and_keeps_what_was_stored(tmp_path, stop,
+                                                                          to_group, code, line):
+    """Ctrl-C or SIGTERM: exit 130 or 143 with one line, no worker left running (SIGTERM to
+    the main process alone once left them computing, orphaned), every agent-seed stored before
+    it readable."""
     stored = tmp_path / "data" / "versus" / "ase_ace"
     run = subprocess.Popen([sys.executable, "-m", "clnn_ros.reproduce", "versus", "--agents",
                             "ase_ace", "--seeds", "0-999", "--workers", "2", "--out",
@@ -236,20 +243,24 @@ def test_versus_ctrl_c_ends_at_once_in_one_line_and_keeps_what_was_stored(tmp_pa
         while len(list(stored.glob("*.npz"))) < 2 and run.poll() is None:
             assert time.monotonic() < deadline, "no agent-seed stored"
             time.sleep(0.2)
-        os.killpg(run.pid, signal.SIGINT)
+        (os.killpg if to_group else os.kill)(run.pid, stop)
         _, err = run.communicate(timeout=HANG_S)
     finally:
         if run.poll() is None:
             os.killpg(run.pid, signal.SIGKILL)
-    assert run.returncode == 130, err
-    assert [line for line in err.splitlines() if line.strip()] == ["interrupted"], err
-    kept = list(stored.glob("*.npz"))
-    assert 2 <= len(kept) < 1000
-    assert all(len(load_stored(path)["returns"]) > 0 for path in kept)
-    with pytest.raises(ProcessLookupError):  # the workers too: none of the group is left
-        for _ in range(int(HANG_S / 0.1)):
-            os.killpg(run.pid, 0)
-            time.sleep(0.1)
+    try:
+        assert run.returncode == code, err
+        assert [text for text in err.splitlines() if text.strip()] == [line], err
+        kept = list(stored.glob("*.npz"))
+        assert 2 <= len(kept) < 1000
+        assert all(len(load_stored(path)["returns"]) > 0 for path in kept)
+        with pytest.raises(ProcessLookupError):  # the workers too: none of the group is left
+            for _ in range(int(HANG_S / 0.1)):
+                os.killpg(run.pid, 0)
+                time.sleep(0.1)
+    finally:  # a failed test leaves no orphaned worker behind
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(run.pid, signal.SIGKILL)
 
 
 @pytest.mark.parametrize("agents, message", [

@@ -24,12 +24,13 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
 import time
 from contextlib import contextmanager
 from pathlib import Path
 
-from ..cli import OneLineArgumentParser
+from ..cli import OneLineArgumentParser, Terminated, sigterm_raises
 from ..core.params import CARTPOLE, ParamError, Params
 from ..core.presets import PRESETS
 from .arguments import add_model_flags, add_task_flags, learn_params, task_values
@@ -323,7 +324,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        args.func(args)
+        with sigterm_raises():
+            args.func(args)
     except (ParamError, ValueError) as exc:
         print(f"python -m clnn_ros.reproduce {args.command}: error: {exc}", file=sys.stderr)
         return 2
@@ -339,6 +341,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except Terminated:
+        print("terminated", file=sys.stderr)
+        return 128 + signal.SIGTERM
     return 0
 
 
