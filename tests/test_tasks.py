@@ -218,6 +218,9 @@ def test_learn_a_gymnasium_task_from_the_command_line(tmp_path, capsys):
     assert "solved gymnasium:MountainCar-v0 (last 100 returns averaging -110 or more): 0 of 2" \
         in out
     rows = (tmp_path / "learn_MountainCar-v0.csv").read_text().splitlines()
+    summary = (tmp_path / "learn_MountainCar-v0.md").read_text()
+    assert "| 2 |" in summary and "![learning curve](learn_MountainCar-v0.png)" in summary
+    assert (tmp_path / "learn_MountainCar-v0.png").read_bytes().startswith(b"\x89PNG")
     assert rows[0] == "seed,trial,steps,return,terminated" and len(rows) == 1 + 2 * 3
     task, env = make("gymnasium:MountainCar-v0")
     core = run_task_episode(2, task_params(task, {"trials": "3", "sigma": "64"}), task, env)

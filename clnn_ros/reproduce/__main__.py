@@ -41,7 +41,7 @@ from .figures import figures_markdown, make_figures
 from .gym_eval import RESET_STRIDE, gym_eval, load_learn_output, print_gym_eval, write_gym_eval
 from .gymnasium_physics import SELECT_SEEDS, gymnasium_markdown, gymnasium_study, write_gymnasium
 from .learning import encodings, learn_run, paper_runs, print_seed_means, write_learn_outputs
-from .task_learning import learn_task, print_task_summary, write_task_outputs
+from .task_learning import learn_task, summary_lines, write_task_outputs
 from .open_choices import OPTION_SEEDS, open_choices, open_choices_markdown, write_open_choices
 from .local_optima import (LOCAL_OPTIMA_SEEDS, local_optima, local_optima_markdown,
                            plot_local_optima, write_local_optima)
@@ -102,7 +102,7 @@ def cmd_learn(args) -> None:
         task_run = learn_task(args.task, args.actions, seeds, task_values(args), Params(),
                               Path(args.out) / "runs", args.workers or os.cpu_count() or 1)
         files = write_task_outputs(task_run, Path(args.out))
-        print_task_summary(task_run)
+        print("\n".join(summary_lines(task_run)))
         print("wrote " + ", ".join(str(f) for f in files))
         return
     if args.actions is not None:

@@ -16,7 +16,8 @@ from ..core.solving import WINDOW, solved_episode
 from ..core.task import Task
 from ..core.task_episode import TaskEpisodeResult, run_task_episode
 from ..tasks.gymnasium_task import env_id, make, task_params
-from .common import load_stored, progress, store_arrays, store_path, write_csv
+from ..figures import plot_task_returns
+from .common import load_stored, md_table, progress, store_arrays, store_path, write_csv
 from .workers import in_workers
 
 
@@ -60,41 +61,58 @@ def task_seed(task_name: str, actions: str | None, p: Params, seed: int) -> dict
 
 
 def write_task_outputs(run: TaskRun, out: Path) -> list[Path]:
-    """learn_<task>.csv (a row per trial) and final_weights_<task>.npz."""
+    """learn_<task>.csv (a row per trial), final_weights_<task>.npz, the learning curve
+    learn_<task>.png and the summary learn_<task>.md."""
     rows = ([e.seed, trial, int(e.steps[trial]), repr(float(e.returns[trial])),
              int(e.terminated[trial])] for e in run.episodes for trial in range(len(e.steps)))
     out.mkdir(parents=True, exist_ok=True)
     npz = out / f"final_weights_{run.name}.npz"
+    returns = np.array([e.returns for e in run.episodes])
     np.savez_compressed(npz, seeds=[e.seed for e in run.episodes],
                         final_weights=np.array([e.final_weights for e in run.episodes]),
-                        steps=np.array([e.steps for e in run.episodes]),
-                        returns=np.array([e.returns for e in run.episodes]),
+                        steps=np.array([e.steps for e in run.episodes]), returns=returns,
                         terminated=np.array([e.terminated for e in run.episodes]),
                         task=run.task.name, params=json.dumps(run.params.to_dict()))
-    return [write_csv(out / f"learn_{run.name}.csv",
-                      ["seed", "trial", "steps", "return", "terminated"], rows), npz]
+    csv = write_csv(out / f"learn_{run.name}.csv",
+                    ["seed", "trial", "steps", "return", "terminated"], rows)
+    figure = plot_task_returns(returns, out / f"learn_{run.name}.png",
+                               f"{run.task.name}: the RLN agent learning",
+                               run.task.reward_threshold)
+    summary = out / f"learn_{run.name}.md"
+    summary.write_text(f"# {run.task.name}: the RLN agent learning\n\n"
+                       + "\n".join(summary_lines(run, markdown=True))
+                       + f"\n\n![learning curve]({figure.name})\n\nPer trial: [{csv.name}]"
+                         f"({csv.name}); final weights: {npz.name}.\n")
+    return [csv, npz, figure, summary]
 
 
-def print_task_summary(run: TaskRun) -> None:
+def summary_lines(run: TaskRun, markdown: bool = False) -> list[str]:
+    """What the run shows: the task, each seed's returns, and how many seeds solved it (a
+    Markdown table with `markdown`, else aligned text)."""
     task, threshold = run.task, run.task.reward_threshold
-    print(f"{task.name}: {len(run.episodes)} seeds x {run.params.trials} episodes; "
-          f"{len(task.actions)} actions ({', '.join(task.action_labels)}); encoded: "
-          f"{', '.join(run.params.state_vars)}; reward mapping {run.params.reward_mapping}")
-    print(f"{'seed':>6s} {'mean return':>12s} {'last 100':>10s} {'solved at':>10s}")
-    solved = []
+    header = ["seed", "mean return", f"last {WINDOW}", "solved at episode"]
+    lines = [f"{task.name}: {len(run.episodes)} seeds x {run.params.trials} episodes; "
+             f"{len(task.actions)} actions ({', '.join(task.action_labels)}); encoded: "
+             f"{', '.join(run.params.state_vars)}; reward mapping {run.params.reward_mapping}",
+             ""]
+    rows, solved = [], []
     for e in run.episodes:
         episode = None if threshold is None else solved_episode(e.returns, threshold)
         if episode is not None:
             solved.append((episode, int(e.steps[:episode].sum())))
-        print(f"{e.seed:6d} {e.returns.mean():12.1f} {e.returns[-WINDOW:].mean():10.1f} "
-              f"{'-' if episode is None else episode:>10}")
+        rows.append([e.seed, f"{e.returns.mean():.1f}", f"{e.returns[-WINDOW:].mean():.1f}",
+                     "-" if episode is None else episode])
+    widths = (6, 12, 10, 18)
+    lines += md_table(header, rows).splitlines() if markdown else \
+        [" ".join(f"{cell:>{width}}" for cell, width in zip(row, widths))
+         for row in [header, *rows]]
+    lines.append("")
     if threshold is None:
-        print(f"{task.name} has no reward threshold: no seed is judged solved")
-        return
+        return lines + [f"{task.name} has no reward threshold: no seed is judged solved"]
     line = (f"solved {task.name} (last {WINDOW} returns averaging {threshold:g} or more): "
             f"{len(solved)} of {len(run.episodes)} seeds")
     if solved:
         episodes, steps = np.array(solved).T
         line += (f"; episodes to solve: median {np.median(episodes):g}; environment steps: "
                  f"median {np.median(steps):,.0f}")
-    print(line)
+    return lines + [line]
