@@ -6,9 +6,9 @@
 
 Beyond the paper, any of the four state variables in any order (Params.state_vars), each with
 its edges as parameters (Params.edges_of), and any other task's named variables
-(core.task.Task.variables, their edges in Params.variable_edges). Only the interior edges matter: a value below the
-first edge falls in the first interval, one at or above the last in the last (the environment
-fails the trial before the angle leaves +-12 deg).
+(core.task.Task.variables, their edges in Params.variable_edges). Only the interior edges
+matter: a value below the first edge falls in the first interval, one at or above the last in
+the last (the environment fails the trial before the angle leaves +-12 deg).
 """
 
 from __future__ import annotations

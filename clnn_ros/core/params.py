@@ -139,9 +139,11 @@ class Params:
         self.validate()
         intervals = [len(self.edges_of(v)) + 1 for v in names]
         object.__setattr__(self, "n_inputs", sum(intervals))
-        # half the input combinations, rounded up, at most what the messages carry
+        # half the input combinations, rounded up; another task's (many variables) at most
+        # what the messages carry
+        half = -(-math.prod(intervals) // 2)
         object.__setattr__(self, "n_segments", self.segments or
-                           min(-(-math.prod(intervals) // 2), MAX_SEGMENTS))
+                           (half if self.task == CARTPOLE else min(half, MAX_SEGMENTS)))
 
     def edges_of(self, state_var: str) -> tuple[float, ...]:
         """The interior interval edges of a state variable, in its unit."""
@@ -378,7 +380,8 @@ def params_from_strings(values: dict[str, str], base: Params | None = None) -> P
     return base.replace(**converted)
 
 
-__all__ = ["Params", "ParamError", "REWARD_MAPPINGS", "CARTPOLE", "MAX_ACTIONS", "params_from_strings", "protocol_defaults", "PHYSICS", "PROTOCOLS",
+__all__ = ["Params", "ParamError", "params_from_strings", "protocol_defaults", "PHYSICS",
+           "PROTOCOLS", "REWARD_MAPPINGS", "CARTPOLE", "MAX_ACTIONS",
            "GYMNASIUM_MAX_STEPS", "INTEGRATORS", "TIE_BREAKS",
            "TAGGING", "E_FLAGS", "SUCCESS_COUNTER", "DECAY_COUNTERS", "FIRST_ACTION",
            "PUNISH_TIMING", "INFERENCE", "STATE_NAMES", "STATE_VAR_ORDER"]

@@ -2,8 +2,8 @@
 
 One RLN per action of the task (K >= 2; the paper's cart-pole has two: neuron 0 drives -F and
 neuron 1 drives +F). Each has one dendrite of q segments; each segment has one synapse per
-encoder input. The per-synapse state is that of the paper's Figures
-5 and 6: decay counters (each kept as the tick at which it was set, see below) and e flags.
+encoder input. The per-synapse state is that of the paper's Figures 5 and 6: decay counters
+(each kept as the tick at which it was set, see below) and e flags.
 
 Inference (every tick, section 2.2):
     segment response = sum over spiking inputs of ceil(w)      (small-integer inference;

@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from .encoder import STATE_UNITS
 from .params import CARTPOLE, STATE_NAMES, ParamError, Params, params_from_strings
 
 ENDS_IN = ("failure", "success")  # what a terminated episode means
@@ -36,8 +37,8 @@ class Variable:
 
 @dataclass(frozen=True)
 class Action:
-    """One of the task's actions: a label for people, and what the environment is given (an index
-    of a Discrete space, or a value of a Box one)."""
+    """One of the task's actions: a label for people, and what it applies (a Gymnasium task's
+    Discrete index or declared Box value; the cart-pole's force direction)."""
 
     label: str
     value: float
@@ -119,5 +120,5 @@ class Task:
 # +F); its episode length is Params.max_steps, its protocol Params.protocol.
 CARTPOLE_TASK = Task(
     CARTPOLE,
-    tuple(Variable(name, unit) for name, unit in zip(STATE_NAMES, ("m", "m/s", "deg", "deg/s"))),
+    tuple(Variable(name, unit) for name, unit in zip(STATE_NAMES, STATE_UNITS)),
     (Action("-F", -1.0), Action("+F", 1.0)))

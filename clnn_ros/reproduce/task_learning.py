@@ -1,7 +1,7 @@
 """Learning any task but the cart-pole (`clnn-reproduce learn --task gymnasium:ID`): each seed's
 episode with the pure core (core.task_episode) in the task's own environment, the seeds shared
-out to worker processes (the batch engine is the cart-pole's). Judged as the field judges the task: solved at the first
-episode whose last 100 returns average the task's threshold or more."""
+out to worker processes (the batch engine is the cart-pole's). Judged as the field judges the
+task: solved at the first episode whose last 100 returns average its threshold or more."""
 
 from __future__ import annotations
 
