@@ -242,21 +242,23 @@ def plot_sorted_means(panels: list[tuple[str, dict[str, np.ndarray]]], path: Pat
     return _save(fig, path)
 
 
-def plot_task_returns(returns: np.ndarray, path: Path, title: str,
+def plot_task_returns(curves: dict[str, np.ndarray], path: Path, title: str,
                       threshold: float | None) -> Path:
-    """A task's learning curve: per episode, the median and quartiles over seeds of each seed's
-    mean of its last 10 returns (returns: seeds x episodes), and the task's threshold."""
-    smooth = np.array([np.convolve(r, np.ones(10))[:len(r)] / np.minimum(np.arange(len(r)) + 1,
-                                                                         10) for r in returns])
-    q1, q2, q3 = np.percentile(smooth, (25, 50, 75), axis=0)
-    episodes = np.arange(1, returns.shape[1] + 1)
+    """Learning curves of a task: for each label's returns (seeds x episodes), per episode the
+    median and quartiles over seeds of each seed's mean of its last 10 returns; the task's
+    threshold."""
     fig, ax = plt.subplots(figsize=(8, 4.5), constrained_layout=True)
-    line, = ax.plot(episodes, q2, label=f"median of {len(returns)} seeds")
-    ax.fill_between(episodes, q1, q3, color=line.get_color(), alpha=0.2, label="quartiles")
+    for label, returns in curves.items():
+        smooth = np.array([np.convolve(r, np.ones(10))[:len(r)] /
+                           np.minimum(np.arange(len(r)) + 1, 10) for r in returns])
+        q1, q2, q3 = np.percentile(smooth, (25, 50, 75), axis=0)
+        episodes = np.arange(1, returns.shape[1] + 1)
+        line, = ax.plot(episodes, q2, label=label)
+        ax.fill_between(episodes, q1, q3, color=line.get_color(), alpha=0.2)
     if threshold is not None:
         ax.axhline(threshold, color="grey", linestyle=":", label=f"threshold {threshold:g}")
     ax.set_xlabel("episode")
     ax.set_ylabel("return (mean of the last 10 episodes)")
-    ax.set_title(title)
-    ax.legend(fontsize=8)
+    ax.set_title(f"{title}: median and quartiles over seeds")
+    ax.legend(fontsize=7)
     return _save(fig, path)

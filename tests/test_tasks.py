@@ -265,3 +265,21 @@ def test_the_graph_refuses_task_values_it_does_not_carry_yet_in_one_line(option)
     assert done.returncode == 2 and done.stdout == ""
     assert done.stderr.count("\n") == 1 and "the graph runs the cart-pole" in done.stderr \
         and done.stderr.startswith(f"run_all: error: {option.split('=')[0]}:")
+
+
+def test_sweep_a_gymnasium_task_from_the_command_line(tmp_path, capsys):
+    from clnn_ros.reproduce.__main__ import main
+
+    assert main(["sweep", "--task", "gymnasium:CartPole-v1", "--param", "sigma=16,64",
+                 "--seeds", "3", "--trials", "4", "--out", str(tmp_path)]) == 0
+    assert "| sigma | seeds | solved |" in capsys.readouterr().out
+    rows = (tmp_path / "sweep_CartPole-v1.csv").read_text().splitlines()
+    assert rows[0] == ("sigma,seeds,solved,median episodes to solve,median steps to solve,"
+                       "mean return,mean of the last 100")
+    task, env = make("gymnasium:CartPole-v1")
+    for row, sigma in zip(rows[1:], (16, 64)):
+        core = run_task_episode(3, task_params(task, {"trials": "4", "sigma": str(sigma)}), task,
+                                env)
+        assert row == f"{sigma},1,0,-,-,{core.returns.mean():.1f},{core.returns.mean():.1f}"
+    assert len(rows) == 3 and (tmp_path / "sweep_CartPole-v1.png").exists()
+    assert "variable_edges=x:-0.8,0.8;" in (tmp_path / "sweep_CartPole-v1.md").read_text()

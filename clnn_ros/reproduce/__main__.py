@@ -42,6 +42,7 @@ from .gym_eval import RESET_STRIDE, gym_eval, load_learn_output, print_gym_eval,
 from .gymnasium_physics import SELECT_SEEDS, gymnasium_markdown, gymnasium_study, write_gymnasium
 from .learning import encodings, learn_run, paper_runs, print_seed_means, write_learn_outputs
 from .task_learning import learn_task, summary_lines, write_task_outputs
+from .task_sweep import sweep_task, write_task_sweep
 from .open_choices import OPTION_SEEDS, open_choices, open_choices_markdown, write_open_choices
 from .local_optima import (LOCAL_OPTIMA_SEEDS, local_optima, local_optima_markdown,
                            plot_local_optima, write_local_optima)
@@ -119,6 +120,15 @@ def cmd_sweep(args) -> None:
     seeds = parse_seeds(args.seeds)
     grid = parse_grid(args.param)
     check_sweep_names(grid)
+    if args.task != CARTPOLE:
+        runs = sweep_task(args.task, args.actions, grid, seeds, task_values(args),
+                          Path(args.out) / "runs", args.workers or os.cpu_count() or 1)
+        files = write_task_sweep(runs, Path(args.out))
+        print(files[-1].read_text())
+        print("wrote " + ", ".join(str(f) for f in files))
+        return
+    if args.actions is not None:
+        raise ValueError("--actions goes with --task gymnasium:ID")
     configs = sweep_configs(learn_params(args), grid)  # all valid before anything runs
     with executor(args):
         runs = sweep(configs, seeds, Path(args.out) / "runs", log)
@@ -256,6 +266,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="a model parameter and its values (repeatable: the grid is every "
                          "combination)")
     add_model_flags(sw, "any other Params field, fixed for the whole grid")
+    add_task_flags(sw)
     sw.add_argument("--out", default="out/sweep",
                     help="folder for the CSV files, figure, summary; finished units are "
                          "kept in OUT/runs/ and not run again (an interrupted sweep resumes)")

@@ -35,21 +35,30 @@ class TaskRun:
 def learn_task(task_name: str, actions: str | None, seeds, values: dict[str, str],
                base: Params, store: Path, workers: int) -> TaskRun:
     """Every seed's episode of the task, its Params the task's first encoding, then `values`
-    over `base`; the seeds run in `workers` processes, each one's result kept in `store` as
-    it finishes (a seed stored there is not run again: an interrupted run resumes)."""
+    over `base` (run_task_jobs)."""
     task, _ = make(task_name, actions)
     p = task_params(task, values, base)
-    paths = {int(seed): store_path(store, f"{env_id(task_name)}_seed_{seed}",
-                                   [task_name, actions, p.to_dict(), int(seed)])
-             for seed in seeds}
-    results = {seed: load_stored(path) for seed, path in paths.items() if path.exists()}
-    todo = [(task_name, actions, p, seed) for seed in paths if seed not in results]
+    seeds = [int(seed) for seed in seeds]
+    results = run_task_jobs(task_name, actions, [(p, seed) for seed in seeds], store, workers)
+    return TaskRun(task, p, [TaskEpisodeResult(seed, **arrays)
+                             for seed, arrays in zip(seeds, results)])
+
+
+def run_task_jobs(task_name: str, actions: str | None, jobs: list[tuple[Params, int]],
+                  store: Path, workers: int) -> list[dict]:
+    """The arrays of each job's episode (its Params, its seed), in the jobs' order: run in
+    `workers` processes, each kept in `store` as it finishes (a job stored there is not run
+    again: an interrupted run resumes)."""
+    paths = {(p, seed): store_path(store, f"{env_id(task_name)}_seed_{seed}",
+                                   [task_name, actions, p.to_dict(), seed]) for p, seed in jobs}
+    results = {job: load_stored(path) for job, path in paths.items() if path.exists()}
+    todo = [(task_name, actions, p, seed) for p, seed in paths if (p, seed) not in results]
     if todo:
         finished = in_workers(task_seed, todo, workers)
-        for (_, _, _, seed), arrays in progress(finished, env_id(task_name)):
-            results[seed] = arrays
-            store_arrays(paths[seed], arrays)
-    return TaskRun(task, p, [TaskEpisodeResult(seed, **results[seed]) for seed in paths])
+        for (_, _, p, seed), arrays in progress(finished, env_id(task_name)):
+            results[p, seed] = arrays
+            store_arrays(paths[p, seed], arrays)
+    return [results[job] for job in jobs]
 
 
 def task_seed(task_name: str, actions: str | None, p: Params, seed: int) -> dict:
@@ -75,9 +84,8 @@ def write_task_outputs(run: TaskRun, out: Path) -> list[Path]:
                         task=run.task.name, params=json.dumps(run.params.to_dict()))
     csv = write_csv(out / f"learn_{run.name}.csv",
                     ["seed", "trial", "steps", "return", "terminated"], rows)
-    figure = plot_task_returns(returns, out / f"learn_{run.name}.png",
-                               f"{run.task.name}: the RLN agent learning",
-                               run.task.reward_threshold)
+    figure = plot_task_returns({f"{len(returns)} seeds": returns}, out / f"learn_{run.name}.png",
+                               f"{run.task.name}, the RLN agent", run.task.reward_threshold)
     summary = out / f"learn_{run.name}.md"
     summary.write_text(f"# {run.task.name}: the RLN agent learning\n\n"
                        + "\n".join(summary_lines(run, markdown=True))
@@ -89,30 +97,36 @@ def write_task_outputs(run: TaskRun, out: Path) -> list[Path]:
 def summary_lines(run: TaskRun, markdown: bool = False) -> list[str]:
     """What the run shows: the task, each seed's returns, and how many seeds solved it (a
     Markdown table with `markdown`, else aligned text)."""
-    task, threshold = run.task, run.task.reward_threshold
+    task = run.task
     header = ["seed", "mean return", f"last {WINDOW}", "solved at episode"]
     lines = [f"{task.name}: {len(run.episodes)} seeds x {run.params.trials} episodes; "
              f"{len(task.actions)} actions ({', '.join(task.action_labels)}); encoded: "
              f"{', '.join(run.params.state_vars)}; reward mapping {run.params.reward_mapping}",
              ""]
-    rows, solved = [], []
-    for e in run.episodes:
-        episode = None if threshold is None else solved_episode(e.returns, threshold)
-        if episode is not None:
-            solved.append((episode, int(e.steps[:episode].sum())))
-        rows.append([e.seed, f"{e.returns.mean():.1f}", f"{e.returns[-WINDOW:].mean():.1f}",
-                     "-" if episode is None else episode])
+    solved = [solving(e, task.reward_threshold) for e in run.episodes]
+    rows = [[e.seed, f"{e.returns.mean():.1f}", f"{e.returns[-WINDOW:].mean():.1f}",
+             "-" if at is None else at[0]] for e, at in zip(run.episodes, solved)]
     widths = (6, 12, 10, 18)
     lines += md_table(header, rows).splitlines() if markdown else \
         [" ".join(f"{cell:>{width}}" for cell, width in zip(row, widths))
          for row in [header, *rows]]
-    lines.append("")
-    if threshold is None:
-        return lines + [f"{task.name} has no reward threshold: no seed is judged solved"]
-    line = (f"solved {task.name} (last {WINDOW} returns averaging {threshold:g} or more): "
-            f"{len(solved)} of {len(run.episodes)} seeds")
-    if solved:
-        episodes, steps = np.array(solved).T
+    return lines + ["", solved_line(task, solved)]
+
+
+def solving(episode: TaskEpisodeResult, threshold: float | None) -> tuple[int, int] | None:
+    """(the episode it solved the task at, the environment steps up to it), or None."""
+    at = None if threshold is None else solved_episode(episode.returns, threshold)
+    return None if at is None else (at, int(episode.steps[:at].sum()))
+
+
+def solved_line(task: Task, solved: list[tuple[int, int] | None]) -> str:
+    """How many seeds solved the task (solving, per seed) and what it took them."""
+    if task.reward_threshold is None:
+        return f"{task.name} has no reward threshold: no seed is judged solved"
+    line = (f"solved {task.name} (last {WINDOW} returns averaging {task.reward_threshold:g} or "
+            f"more): {sum(at is not None for at in solved)} of {len(solved)} seeds")
+    if any(at is not None for at in solved):
+        episodes, steps = np.array([at for at in solved if at is not None]).T
         line += (f"; episodes to solve: median {np.median(episodes):g}; environment steps: "
                  f"median {np.median(steps):,.0f}")
-    return lines + [line]
+    return line
