@@ -34,6 +34,7 @@ from numba.extending import intrinsic, register_jitable
 
 from .core import encoder, jitable, params, physics, random_stream, rln
 from .core import rule as rule_values
+from .core.agent import Kernels
 from .core.encoder import Encoder, encode_active
 from .core.episode import angle_grid, first_angle, seed_setup, trial_starts
 from .core.params import CARTPOLE, ParamError, Params
@@ -51,6 +52,11 @@ for _function, _options in jitable.MARKED:
         register_jitable(_function)
 
 STALE = -1  # a cached decision made before the weights last changed
+
+# The rule's costly functions compiled for an agent that ticks in Python (core.agent.Kernels):
+# a task's network of thousands of synapses, stepped by its own simulator (core.task_episode).
+COMPILED_KERNELS = Kernels(*(numba.njit(cache=True)(function)
+                             for function in (rln.infer, rln.update, rln.rerandomize)))
 
 
 # ---- one lane: one seed's episode, tick by tick ------------------------------------------------
@@ -304,7 +310,7 @@ def _drop_stale_cache() -> None:
     try:
         if stamp.exists() and stamp.read_text() == digest:
             return
-        for dispatcher in (_run_many, _scratch, _work, _tick):
+        for dispatcher in (_run_many, _scratch, _work, _tick, *vars(COMPILED_KERNELS).values()):
             dispatcher._cache.flush()
         stamp.parent.mkdir(parents=True, exist_ok=True)
         stamp.write_text(digest)

@@ -1,6 +1,6 @@
 """Benchmark of the model itself (no ROS): agent-steps per second of the numba batch engine, of the
-pure-Python reference core and of Gymnasium's CartPole-v1 environment alone (no agent), all
-measured in this one run, plus the wall time of the paper's full 1-SV set (32 seeds x 512 trials)
+pure-Python reference core and of Gymnasium's CartPole-v1 environment alone (no agent), the
+RLN agent on Gymnasium's other tasks beside their own step, all measured in this one run, plus the wall time of the paper's full 1-SV set (32 seeds x 512 trials)
 with the compile time reported separately.
 
     python scripts/benchmark_core.py [--out docs/benchmark_core.md] [--against REV] [--threads 1,2]
@@ -41,6 +41,7 @@ REPEATS = 3  # best of, for the batch engine's full set
 THREADS = (1, 2)
 FLOOR_STEPS = 20_000_000  # physics steps per floor measurement
 LANES = (1, 2, 4, 8)  # independent cart-poles stepped in turn
+TASK_STEPS = 20_000  # steps per Gymnasium task, of the learner and of the environment alone
 
 
 def compile_seconds() -> float:
@@ -115,6 +116,48 @@ def gymnasium_rate() -> float:
         if terminated:
             env.reset()
     return GYM_STEPS / (time.perf_counter() - start)
+
+
+def task_rates() -> list[tuple[str, float, float]]:
+    """(task, the learner's agent-steps/s, Gymnasium's own steps/s) for each Gymnasium task the
+    project knows: the pure core learning in the task's environment (one process, its first
+    encoding), and the same environment stepped alone with its actions in turn (resets
+    included): the floor of any learner that steps Gymnasium's own code."""
+    from clnn_ros.batch import COMPILED_KERNELS
+    from clnn_ros.core.task_episode import run_task_episode
+    from clnn_ros.tasks.gymnasium_task import KNOWN, make, task_params
+
+    rates = []
+    for identifier in KNOWN:
+        task, env = make(f"gymnasium:{identifier}")
+        p = task_params(task)
+        run_task_episode(0, p.replace(trials=1), task, env, kernels=COMPILED_KERNELS)  # compiled
+        ticks, trials, start = 0, 1, time.perf_counter()
+        while ticks < TASK_STEPS:
+            ticks += int(run_task_episode(0, p.replace(trials=trials), task, env,
+                                          kernels=COMPILED_KERNELS).steps.sum())
+            trials *= 2
+        learner = ticks / (time.perf_counter() - start)
+        env.reset(0)
+        start = time.perf_counter()
+        for k in range(TASK_STEPS):
+            _, _, terminated, truncated = env.step(k % len(task.actions))
+            if terminated or truncated:
+                env.reset(None)
+        rates.append((identifier, learner, TASK_STEPS / (time.perf_counter() - start)))
+    return rates
+
+
+def task_lines(rates: list[tuple[str, float, float]]) -> list[str]:
+    return ["Gymnasium's tasks (issue 45): the RLN agent learning in the task's own "
+            "environment as `clnn-reproduce learn --task` runs it (the core ticking in Python, "
+            "the rule's costly functions compiled; one process, the task's first encoding), "
+            "beside that environment's own step alone (its actions in turn, resets included): "
+            "the floor of any learner that steps Gymnasium's code.", "",
+            "| task | learner agent-steps/s | Gymnasium env.step alone | learner / env.step |",
+            "|---|---:|---:|---:|",
+            *[f"| {task} | {learner:,.0f} | {alone:,.0f} | {learner / alone:.2f} |"
+              for task, learner, alone in rates], ""]
 
 
 def physics_floor() -> tuple[float, dict[int, float]]:
@@ -252,6 +295,7 @@ def main() -> None:
     core = core_rate()
     gym = gymnasium_rate()
     pair_ns, step_ns = physics_floor()
+    tasks = task_rates()
     rows = []
     for n in threads:
         for nsv in (1, 2):
@@ -284,6 +328,7 @@ def main() -> None:
         *(comparison(sets, args.against, threads) if args.against else []),
         *scaling(sets, list(roots), threads),
         *(floor_lines(pair_ns, step_ns, sets, args.against) if 1 in threads else []),
+        *task_lines(tasks),
     ])
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(text)

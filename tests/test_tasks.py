@@ -283,3 +283,22 @@ def test_sweep_a_gymnasium_task_from_the_command_line(tmp_path, capsys):
         assert row == f"{sigma},1,0,-,-,{core.returns.mean():.1f},{core.returns.mean():.1f}"
     assert len(rows) == 3 and (tmp_path / "sweep_CartPole-v1.png").exists()
     assert "variable_edges=x:-0.8,0.8;" in (tmp_path / "sweep_CartPole-v1.md").read_text()
+
+
+@pytest.mark.parametrize("name, changes", [
+    ("gymnasium:Acrobot-v1", {}),
+    ("gymnasium:LunarLander-v3", {"tie_break": "random", "rerandomize_every": "2",
+                                  "explore": "0.01", "tagging": "both_neurons"}),
+])
+def test_the_compiled_kernels_are_the_cores_bit_for_bit(name, changes):
+    """The rule's costly functions compiled (what learn --task runs) give the core's episode."""
+    from clnn_ros.batch import COMPILED_KERNELS
+
+    task, _ = make(name)
+    p = task_params(task, {"trials": "6", "sigma": "32", "omega": "64", **changes})
+    ours = run_task_episode(5, p, task, make(name)[1], kernels=COMPILED_KERNELS)
+    core = run_task_episode(5, p, task, make(name)[1])
+    assert ours.steps.tolist() == core.steps.tolist()
+    assert ours.returns.tolist() == core.returns.tolist()
+    assert np.array_equal(ours.final_weights, core.final_weights)
+    assert not np.array_equal(core.final_weights, seed_setup(5, p)[0])  # it learned

@@ -4,6 +4,9 @@ functions on arrays of its own)."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Callable
+
 import numpy as np
 
 from .params import Params
@@ -32,11 +35,27 @@ class SuccessCounter:
         return kind
 
 
+@dataclass(frozen=True)
+class Kernels:
+    """The rule's functions whose work grows with the network (every synapse, every segment):
+    the core's own, in Python (the nodes' few dozen synapses), or the same functions compiled
+    by the batch engine (clnn_ros.batch.COMPILED_KERNELS: a task's thousands, the same results
+    bit for bit)."""
+
+    infer: Callable = infer
+    update: Callable = update
+    rerandomize: Callable = rerandomize
+
+
+PYTHON_KERNELS = Kernels()
+
+
 class RLNAgent:
     """One RLN per action (params.n_actions) with a network WTA: spikes in, action out; a reward
     kind in, weights updated."""
 
-    def __init__(self, params: Params, weights: np.ndarray, seed: int = 0):
+    def __init__(self, params: Params, weights: np.ndarray, seed: int = 0,
+                 kernels: Kernels = PYTHON_KERNELS):
         shape = (params.n_actions, params.n_segments, params.n_inputs)
         weights = np.asarray(weights, dtype=np.float64)
         if weights.shape != shape:
@@ -44,6 +63,7 @@ class RLNAgent:
         if not np.all((weights >= 0) & (weights <= params.w_max)):
             raise ValueError(f"weights must lie in [0, w_max={params.w_max:g}]")
         self.p = params
+        self.kernels = kernels
         self.rule = Rule.from_params(params)
         self.weights = weights
         self.tick = 0  # the clock of the decay counters
@@ -116,7 +136,7 @@ class RLNAgent:
         restart_counters(self.punish_tagged_at, self.reward_tagged_at, self.eligible, self.rule)
         if learn:
             with np.errstate(over="ignore"):  # the random stream wraps around by design
-                if rerandomize(self._weights, trial, self.rule, self.random_state):
+                if self.kernels.rerandomize(self._weights, trial, self.rule, self.random_state):
                     self._decisions.clear()
 
     def infer(self, spikes: np.ndarray) -> tuple[int, tuple[int, ...]]:
@@ -132,8 +152,9 @@ class RLNAgent:
         if decision is None:
             with np.errstate(over="ignore"):  # tie_break="random": the stream wraps around
                 segments = np.empty(self.p.n_actions, dtype=np.int64)
-                neuron = infer(self._weights, active, self.rule, self.random_state,
-                               response_space(self.p.n_actions, self.p.n_segments), segments)
+                neuron = self.kernels.infer(self._weights, active, self.rule, self.random_state,
+                                            response_space(self.p.n_actions, self.p.n_segments),
+                                            segments)
             decision = int(neuron), segments
             if self.rule.tie_break != TIE_RANDOM:
                 self._decisions[key] = decision
@@ -156,7 +177,8 @@ class RLNAgent:
         """Apply a reward kind (NONE, REWARD, PUNISH), then decay every counter by one."""
         # only a reward with e_flag="live" reads the latest spikes
         last_active = np.flatnonzero(self.last_spikes) if kind == REWARD else NO_INPUTS
-        self.tick = update(kind, self._weights, self.punish_tagged_at, self.reward_tagged_at,
-                           self.eligible, last_active, self.tick, self.rule)
+        self.tick = self.kernels.update(kind, self._weights, self.punish_tagged_at,
+                                        self.reward_tagged_at, self.eligible, last_active,
+                                        self.tick, self.rule)
         if kind != NONE:
             self._decisions.clear()

@@ -16,7 +16,7 @@ from typing import Protocol
 
 import numpy as np
 
-from .agent import RLNAgent, SuccessCounter
+from .agent import PYTHON_KERNELS, Kernels, RLNAgent, SuccessCounter
 from .encoder import Encoder
 from .episode import STARTS_SEED, play_trial, seed_setup
 from .params import Params
@@ -39,12 +39,14 @@ class TaskEpisodeResult:
 
 
 def run_task_episode(seed: int, p: Params, task: Task, env: TaskEnvironment,
-                     learn: bool = True, weights: np.ndarray | None = None) -> TaskEpisodeResult:
+                     learn: bool = True, weights: np.ndarray | None = None,
+                     kernels: Kernels = PYTHON_KERNELS) -> TaskEpisodeResult:
     """One episode of p.trials trials of `task` in `env` (p made for it: Task.params); `weights`
-    override the seed's own."""
+    override the seed's own; `kernels`: the rule's costly functions, the core's or compiled
+    (clnn_ros.batch.COMPILED_KERNELS: the same results)."""
     task.check(p)
     weights = seed_setup(seed, p)[0] if weights is None else weights
-    agent, counter = RLNAgent(p, weights, seed=seed), SuccessCounter(p)
+    agent, counter = RLNAgent(p, weights, seed=seed, kernels=kernels), SuccessCounter(p)
     encoder = Encoder.from_params(p, task.names, task.units)
     steps = np.zeros(p.trials, dtype=np.int64)
     returns = np.zeros(p.trials, dtype=np.float64)

@@ -1,7 +1,8 @@
 """Learning any task but the cart-pole (`clnn-reproduce learn --task gymnasium:ID`): each seed's
-episode with the pure core (core.task_episode) in the task's own environment, the seeds shared
-out to worker processes (the batch engine is the cart-pole's). Judged as the field judges the
-task: solved at the first episode whose last 100 returns average its threshold or more."""
+episode with the core (core.task_episode, its rule's costly functions compiled by the batch
+engine: the same results) in the task's own environment, the seeds shared out to worker
+processes. Judged as the field judges the task: solved at the first episode whose last 100
+returns average its threshold or more."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..batch import COMPILED_KERNELS
 from ..core.params import Params
 from ..core.solving import WINDOW, solved_episode
 from ..core.task import Task
@@ -64,7 +66,7 @@ def run_task_jobs(task_name: str, actions: str | None, jobs: list[tuple[Params, 
 def task_seed(task_name: str, actions: str | None, p: Params, seed: int) -> dict:
     """One seed's episode of the task (in a worker process), as arrays."""
     task, env = make(task_name, actions)
-    result = run_task_episode(seed, p, task, env)
+    result = run_task_episode(seed, p, task, env, kernels=COMPILED_KERNELS)
     return dict(steps=result.steps, returns=result.returns, terminated=result.terminated,
                 final_weights=result.final_weights)
 
