@@ -137,8 +137,8 @@ def _learn(lane, clock, setting, neuron, pattern, stepped):
     x, x_dot, theta, theta_dot, status = stepped
     # Tagged after the step (it reads nothing the step writes): the step's long chain of
     # dependent operations, which the next tick waits for, starts the earliest.
-    tag_action_path(punish_tagged_at, reward_tagged_at, eligible, neuron, decisions[pattern, 1:],
-                    active, now, rule)
+    tag_action_path(punish_tagged_at, reward_tagged_at, eligible, neuron,
+                    (decisions[pattern, 1], decisions[pattern, 2]), active, now, rule)  # 2 neurons
     kind, successes = outcome(successes, status != CONTINUE, rule)
     if learn and kind == NONE:
         now = update(kind, weights, punish_tagged_at, reward_tagged_at, eligible, active, now,

@@ -189,12 +189,22 @@ def tag_segment(punish_tagged_at, reward_tagged_at, eligible, neuron, segment, a
 @tick_kernel
 def tag_action_path(punish_tagged_at, reward_tagged_at, eligible, neuron, segments, active, now,
                     rule):
-    """Tag the winning segment of the winning neuron (`segments`: each neuron's dendrite winner);
-    with tagging="both_neurons" also every other neuron's."""
+    """Tag the winning segment of the winning neuron (`segments`: each neuron's dendrite winner,
+    an array or a tuple); with tagging="both_neurons" also every other neuron's."""
+    if len(segments) == 2:
+        # Of two, a choice between two values: compiled, segments[neuron] would be a jump table
+        # for a tuple, mispredicted whenever the action changes, or a load that waits for the
+        # neuron (the cart-pole's batch engine: a few per cent of its tick).
+        winner, other = (segments[1], segments[0]) if neuron == 1 else (segments[0], segments[1])
+        tag_segment(punish_tagged_at, reward_tagged_at, eligible, neuron, winner, active, now)
+        if rule.tag_both:
+            tag_segment(punish_tagged_at, reward_tagged_at, eligible, 1 - neuron, other, active,
+                        now)
+        return
     tag_segment(punish_tagged_at, reward_tagged_at, eligible, neuron, segments[neuron], active,
                 now)
     if rule.tag_both:
-        for other in range(segments.shape[0]):
+        for other in range(len(segments)):
             if other != neuron:
                 tag_segment(punish_tagged_at, reward_tagged_at, eligible, other, segments[other],
                             active, now)
