@@ -68,16 +68,18 @@ def add_task_flags(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--task", default=CARTPOLE, metavar="NAME",
                         help=f"{CARTPOLE} (the default: the paper's, with the batch engine), or "
                              "gymnasium:ID, any registered Gymnasium task with a Box observation "
-                             "and Discrete actions, e.g. gymnasium:Acrobot-v1 (the pure core, "
-                             "its seeds in --workers processes, default one per CPU)")
+                             "and Discrete actions, e.g. gymnasium:Acrobot-v1 (the core with "
+                             "its rule compiled, its seeds in --workers processes, default one "
+                             "per CPU)")
     parser.add_argument("--actions", metavar="V1,V2,...",
                         help="with --task gymnasium:ID of a Box action space: the values the "
-                             "agent may apply, e.g. -3,3 (one RLN each)")
+                             "agent may apply, one RLN each, e.g. --actions=-3,3 (with '=': "
+                             "argparse takes -3,3 alone for a flag)")
 
 
 def task_values(args) -> dict[str, str]:
-    """The Params values (text) of `learn --task` for a task other than the cart-pole; its
-    flags for the cart-pole alone are refused in one line."""
+    """The Params values (text) of `learn` or `sweep --task` for a task other than the
+    cart-pole; the flags for the cart-pole alone are refused in one line."""
     refused = [OWN_FLAGS[name] for name in CARTPOLE_FLAGS if getattr(args, name) is not None]
     refused += [flag for flag, value in (("--preset", args.preset), ("--ray", args.ray))
                 if value is not None]
