@@ -6,6 +6,7 @@ episode and print a summary.
     python -m clnn_ros.run_all --composed            # all nodes in one process, one executor
     python -m clnn_ros.run_all --env gymnasium       # gymnasium's CartPole-v1 physics
     python -m clnn_ros.run_all --env mujoco          # a cart-pole simulated by MuJoCo
+    python -m clnn_ros.run_all --env gymnasium:Acrobot-v1 --trials 8   # any Gymnasium task
     python -m clnn_ros.run_all --preset gymnasium    # its physics in the project's cart-pole node
     python -m clnn_ros.run_all --env-node "python examples/noisy_cartpole.py"  # your own node
 
@@ -38,6 +39,8 @@ from .core.presets import PRESETS
 from .files import cannot_create
 from .graph.fields import COMPLETED
 from .graph.names import NOT_STARTED, PER_TICK, RECORDER, TRIAL_MANAGER, namespace_problem
+from .tasks import gymnasium_task
+from .tasks.gymnasium_task import PREFIX
 from .graph.run import DEMO, ENVIRONMENTS, OWN_TAU, RUN_SETTINGS, default_bag_path, run_values
 from .graph.ticks import (RUN_END_NOTE, RUN_LAST_TICK_NOTE, TICKS_RECORD, TickRanges,
                           describe_ranges)
@@ -82,11 +85,16 @@ def parse_args(argv):
                         help="a ROS 2 parameters YAML (/**: ros__parameters: ...); options win")
     parser.add_argument("--composed", action="store_true",
                         help="all nodes in one process with one executor")
-    parser.add_argument("--env", choices=ENVIRONMENTS, default="cartpole",
+    parser.add_argument("--env", type=environment_choice, default="cartpole",
+                        metavar="{" + ",".join(ENVIRONMENTS) + f",{PREFIX}ID}}",
                         help="environment node: the paper's cart-pole, gymnasium's CartPole-v1, "
-                             "a cart-pole simulated by MuJoCo, or external: start none and wait "
-                             "(--stall-timeout) for one that someone else starts (a robot's; "
-                             "docs/ENV_CONTRACT.md)")
+                             "a cart-pole simulated by MuJoCo, any Gymnasium task (e.g. "
+                             f"{PREFIX}Acrobot-v1: its first encoding, docs/TASKS.md), or "
+                             "external: start none and wait (--stall-timeout) for one that "
+                             "someone else starts (a robot's; docs/ENV_CONTRACT.md)")
+    parser.add_argument("--actions", metavar="VALUES",
+                        help=f"--env {PREFIX}ID with a Box action space: the values the agent "
+                             f"may apply, e.g. --actions=-1,1")
     parser.add_argument("--namespace", metavar="NAME",
                         help="put every node and topic under /NAME/ (several graphs on one "
                              "ROS domain)")
@@ -119,6 +127,13 @@ def parse_args(argv):
     args = parser.parse_args(argv)
     check_paths_and_commands(parser, args)
     return args
+
+
+def environment_choice(text: str) -> str:
+    if text in ENVIRONMENTS or (text.startswith(PREFIX) and len(text) > len(PREFIX)):
+        return text
+    raise argparse.ArgumentTypeError(f"invalid choice: {text!r} (choose from "
+                                     f"{', '.join(ENVIRONMENTS)} or {PREFIX}ID)")
 
 
 def check_paths_and_commands(parser: argparse.ArgumentParser, args) -> None:
@@ -188,10 +203,16 @@ def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
     if args.init_weights:  # the nodes get a file by its full path
         flags["init_weights"] = args.init_weights if args.init_weights in OPTIMAL else \
             str(Path(args.init_weights).resolve())
-    if args.env_node is None and args.env != "external":
+    defaults = DEMO if checkpoint is None else checkpoint_values(checkpoint)
+    if args.env.startswith(PREFIX):  # the task's own values under the user's
+        defaults = {**{k: v for k, v in defaults.items() if k != "nsv"},
+                    **gymnasium_task.run_values(args.env, args.actions)}
+    elif args.actions is not None:
+        raise ParamError(f"--actions declares the values of a Gymnasium task's Box actions "
+                         f"(--env {PREFIX}ID), not --env {args.env}'s")
+    elif args.env_node is None and args.env != "external":
         flags["simulator"] = args.env
-    values, params = run_values(DEMO if checkpoint is None else checkpoint_values(checkpoint),
-                                args.preset, args.params_file, options, flags)
+    values, params = run_values(defaults, args.preset, args.params_file, options, flags)
     own_tau = OWN_TAU.get(args.env)
     if own_tau is not None and args.env_node is None and params.tau != own_tau:
         raise ParamError(f"--env {args.env} steps {args.env}'s tau of {own_tau:g} s, got "

@@ -34,7 +34,7 @@ import numpy as np
 
 from .checkpoint import Checkpoint, capture, check_resumable, restore
 from .encoder import Encoder
-from .params import Params
+from .params import CARTPOLE, Params
 from .physics import CONTINUE, RAD_TO_DEG, CartPole, at_rest
 from .agent import RLNAgent, SuccessCounter
 
@@ -93,7 +93,10 @@ def trial_start(seed: int, p: Params, trial: int, initial_angle_deg: float) -> t
 
 
 def initial_angles(seed: int, p: Params) -> np.ndarray:
-    """Each trial's first pole angle (deg) under the seed's protocol."""
+    """Each trial's first pole angle (deg) under the seed's protocol; 0 for every trial of
+    another task (its reset draws its start)."""
+    if p.task != CARTPOLE:
+        return np.zeros(p.trials)
     starts, in_radians = trial_starts(seed, p)
     return np.array([first_angle(start, in_radians) for start in starts])
 

@@ -17,7 +17,7 @@ import numpy as np
 from .checkpoint import (Checkpoint, CheckpointError, check_resumable, first_line,
                               load_checkpoint, restore_counter)
 from .optimal import optimal_weights
-from .params import Params
+from .params import CARTPOLE, Params
 from .agent import SuccessCounter
 
 # The names of the optimal weights, and the state variables they are made for.
@@ -47,6 +47,9 @@ def episode_start(setting: str, seed: int, params: Params,
     ParamError) with one line for a name or file that does not fit them. `compared`: the
     parameters a resumed checkpoint must agree on (a node's own; None: all)."""
     if setting.endswith(".npz"):
+        if params.task != CARTPOLE:  # its environment's own random stream is not in it
+            raise CheckpointError(f"a checkpoint resumes the cart-pole's episodes only, not "
+                                  f"{params.task}'s")
         checkpoint = load_checkpoint(setting)
         check_resumable(checkpoint, params, seed, compared)
         return EpisodeStart(resume=checkpoint)
@@ -57,7 +60,7 @@ def load_weights(source: str, params: Params) -> np.ndarray:
     """Initial weights from "fig7" / "fig12" (the optimal weights at w_max) or a `.npy` file of
     shape (2, segments, inputs) with values in [0, w_max]; CheckpointError with one line
     otherwise."""
-    shape = (2, params.n_segments, params.n_inputs)
+    shape = (params.n_actions, params.n_segments, params.n_inputs)
     if source in OPTIMAL:
         weights = optimal_weights(OPTIMAL[source], params.w_max)
         if weights.shape != shape:

@@ -122,3 +122,13 @@ CARTPOLE_TASK = Task(
     CARTPOLE,
     tuple(Variable(name, unit) for name, unit in zip(STATE_NAMES, STATE_UNITS)),
     (Action("-F", -1.0), Action("+F", 1.0)))
+
+
+def cartpole_task(p: Params) -> Task:
+    """The paper's cart-pole with its limits as bounds (a state beyond one terminates: the cart's
+    position and the pole's angle) and its truncation at p.max_steps."""
+    limits = {"cart_position": p.track_limit_m, "pole_angle": p.angle_limit_deg}
+    return Task(CARTPOLE,
+                tuple(Variable(v.name, v.unit, -limits.get(v.name, math.inf),
+                               limits.get(v.name, math.inf)) for v in CARTPOLE_TASK.variables),
+                CARTPOLE_TASK.actions, p.max_steps)

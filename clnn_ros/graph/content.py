@@ -10,14 +10,10 @@ import math
 
 from ..core.params import Params
 from ..core.rln import KIND_OF_CODE
-from .fields import EPISODE_END, END, FAILURE_NONE, FAILURE_REASONS, START
+from .fields import ACTION_NONE, EPISODE_END, END, START
 from .names import ACTION, CLOCK, REWARD, SPIKES, STATE, TRIAL_EVENT, WEIGHTS
 
-N_NEURONS = 2  # the agent's two RLNs: negative and positive force
 EVENT_KINDS = (START, END, EPISODE_END)
-# A simulator's limit check may differ from the message's degrees in the last bits (gymnasium
-# works in radians): a state that did not fail may lie this far beyond a limit.
-LIMIT_TOLERANCE = 1e-6
 
 
 def clock_problem(msg, p: Params) -> str | None:
@@ -38,20 +34,15 @@ def event_problem(msg, p: Params) -> str | None:
     return None
 
 
-def state_problem(msg, p: Params) -> str | None:
-    values = (msg.cart_position_m, msg.cart_velocity_m_per_s, msg.pole_angle_deg,
-              msg.pole_angular_velocity_deg_per_s)
-    if not all(math.isfinite(v) for v in values):
-        return f"non-finite state {values}"
+def observation_problem(msg, p: Params) -> str | None:
+    """What any observation must be; its count and bounds are its task's (the nodes that read
+    the task check them: graph.task_description.Described.observation_problem)."""
+    if not all(math.isfinite(v) for v in msg.values) or not math.isfinite(msg.reward):
+        return f"non-finite values {list(msg.values)} or reward {msg.reward}"
     if msg.successful_steps > p.max_steps:
         return f"{msg.successful_steps} successful steps, more than max_steps {p.max_steps}"
-    if msg.failure >= len(FAILURE_REASONS):
-        return f"failure {msg.failure} is not one of CartPoleState's FAILURE_* codes"
-    if msg.failure == FAILURE_NONE and (
-            abs(msg.pole_angle_deg) > p.angle_limit_deg + LIMIT_TOLERANCE or
-            abs(msg.cart_position_m) > p.track_limit_m + LIMIT_TOLERANCE):
-        return f"out of range: pole angle {msg.pole_angle_deg} deg, cart position " \
-               f"{msg.cart_position_m} m, but not failed"
+    if msg.termination and not msg.terminated:
+        return f"termination {msg.termination} names a reason, but terminated is false"
     return None
 
 
@@ -71,18 +62,17 @@ def reward_problem(msg, _p: Params) -> str | None:
 
 
 def action_problem(msg, p: Params) -> str | None:
-    if msg.force_direction not in (-1, 0, 1):
-        return f"force_direction {msg.force_direction} is not -1, 0 or 1"
-    if msg.force_n != msg.force_direction * p.force:
-        return f"force_n {msg.force_n} is not force_direction x force ({p.force:g} N)"
-    if msg.winning_neuron >= N_NEURONS or msg.winning_segment >= p.n_segments:
-        return f"winning neuron {msg.winning_neuron} / segment {msg.winning_segment} does not " \
-               f"exist ({N_NEURONS} neurons x {p.n_segments} segments)"
+    if msg.action == ACTION_NONE:
+        if msg.winning_segment != 0:
+            return f"ACTION_NONE with winning segment {msg.winning_segment}, not 0"
+    elif msg.action >= p.n_actions or msg.winning_segment >= p.n_segments:
+        return f"action {msg.action} / segment {msg.winning_segment} does not exist " \
+               f"({p.n_actions} actions x {p.n_segments} segments)"
     return None
 
 
 def weights_problem(msg, p: Params) -> str | None:
-    shape = (N_NEURONS, p.n_segments, p.n_inputs)
+    shape = (p.n_actions, p.n_segments, p.n_inputs)
     if (msg.neurons, msg.segments, msg.inputs) != shape or len(msg.weights) != math.prod(shape):
         return f"{len(msg.weights)} weights of shape {(msg.neurons, msg.segments, msg.inputs)}, " \
                f"the network is {shape}"
@@ -92,6 +82,6 @@ def weights_problem(msg, p: Params) -> str | None:
 
 
 # Each topic's rule.
-RULES = {CLOCK: clock_problem, TRIAL_EVENT: event_problem, STATE: state_problem,
+RULES = {CLOCK: clock_problem, TRIAL_EVENT: event_problem, STATE: observation_problem,
          SPIKES: spikes_problem, REWARD: reward_problem, ACTION: action_problem,
          WEIGHTS: weights_problem}

@@ -10,14 +10,16 @@ import numpy as np
 
 # TrialEvent.event
 START, END, EPISODE_END = 0, 1, 2
-# CartPoleState.failure: the physics status of core.physics (CONTINUE, FAIL_ANGLE, FAIL_POSITION)
-FAILURE_NONE, FAILURE_POLE_ANGLE, FAILURE_CART_POSITION = 0, 1, 2
-# ... and each one's name, as TrialEvent.end_reason and trials.csv write it ("": none).
-FAILURE_REASONS = ("", "pole_angle", "cart_position")
-# TrialEvent.end_reason of a trial that reached max_steps (one that failed: its failure_reason).
+# The cart-pole's ways to terminate (its TaskDescription.termination_reasons): its
+# Observation.termination is the physics status of core.physics (CONTINUE 0, FAIL_ANGLE 1,
+# FAIL_POSITION 2), 1 + an index here; TrialEvent.end_reason and trials.csv write the name.
+CARTPOLE_TERMINATIONS = ("pole_angle", "cart_position")
+# TrialEvent.end_reason of a trial that was truncated (the cart-pole: it reached max_steps).
 REACHED_MAX_STEPS = "max_steps"
-# A trial's end reason by the physics status that ended it (CONTINUE: it reached max_steps).
-END_REASONS = (REACHED_MAX_STEPS, *FAILURE_REASONS[1:])
+# A cart-pole trial's end reason by the physics status that ended it (CONTINUE: max_steps).
+END_REASONS = (REACHED_MAX_STEPS, *CARTPOLE_TERMINATIONS)
+# Action.action of a trial's last tick: nothing is applied
+ACTION_NONE = 255
 # EPISODE_END's end_reason (and summary.json's exit_reason) of an episode that ran to its end.
 COMPLETED = "completed"
 # trials.csv, as the trial manager and analyze write it.

@@ -7,7 +7,13 @@ plumbing, hidden by ROS's convention (`ros2 topic list` shows them only with
 
 CLOCK = "clock"
 TRIAL_EVENT = "trial/event"
-STATE = "cartpole/state"
+# The environment's observation every tick, and its task, once, latched (contract version 4)
+STATE = "env/observation"
+TASK = "env/task"
+# Where an environment node of contract versions 1 to 3 published its state (CartPoleState): the
+# graph names such a node instead of waiting for its observations.
+OLDER_STATE = "cartpole/state"
+# The cart-pole drawn for a 3D view (the cart-pole's own, optional)
 MARKERS = "cartpole/markers"
 SPIKES = "rln/spikes"
 REWARD = "rln/reward"
@@ -19,7 +25,8 @@ INPUT_LABELS = "rln/input_labels"
 TOPIC_TYPES = {
     CLOCK: "rosgraph_msgs/msg/Clock",
     TRIAL_EVENT: "clnn_ros_msgs/msg/TrialEvent",
-    STATE: "clnn_ros_msgs/msg/CartPoleState",
+    TASK: "clnn_ros_msgs/msg/TaskDescription",
+    STATE: "clnn_ros_msgs/msg/Observation",
     MARKERS: "visualization_msgs/msg/MarkerArray",
     SPIKES: "clnn_ros_msgs/msg/SpikeVector",
     REWARD: "clnn_ros_msgs/msg/Reward",
@@ -28,6 +35,7 @@ TOPIC_TYPES = {
     INPUT_LABELS: "clnn_ros_msgs/msg/InputLabels",
 }
 PER_TICK = (CLOCK, STATE, SPIKES, REWARD, ACTION)  # one message per tick
+LATCHED = (TASK, INPUT_LABELS)  # once per run, kept for a subscriber that joins later
 # Topics an environment of one's own may leave out (docs/ENV_CONTRACT.md): only viewers read them.
 OPTIONAL = (MARKERS,)
 
@@ -41,7 +49,7 @@ SAVE_CHECKPOINT = "~/save_checkpoint"
 
 # The version of the environment-node contract (docs/ENV_CONTRACT.md, "Versions"): what an
 # environment node written against it publishes and reads. The checker prints it.
-ENV_CONTRACT_VERSION = 3
+ENV_CONTRACT_VERSION = 4
 # The nodes the trial manager waits for before the first tick, and the recorder's name.
 GRAPH_NODES = ("environment", "encoder", "reward", "agent")
 # The graph nodes that run on the graph's sim time (use_sim_time, whose TimeSource subscribes
@@ -55,11 +63,11 @@ NOT_STARTED = 3
 # Who publishes what within a tick, in causal order.
 PUBLISHED_BY = {CLOCK: TRIAL_MANAGER, TRIAL_EVENT: TRIAL_MANAGER, STATE: "environment",
                 SPIKES: "encoder", REWARD: "reward", ACTION: "agent", WEIGHTS: "agent",
-                INPUT_LABELS: "encoder", MARKERS: "environment"}
+                INPUT_LABELS: "encoder", MARKERS: "environment", TASK: "environment"}
 
 
 def absolute(topic: str, namespace: str = "/") -> str:
-    """A relative name resolved in `namespace` ("/", "/robot1"): "/robot1/cartpole/state"."""
+    """A relative name resolved in `namespace` ("/", "/robot1"): "/robot1/env/observation"."""
     return namespace.rstrip("/") + "/" + topic
 
 

@@ -25,7 +25,7 @@ from .names import RECORDER, TRIAL_MANAGER, clock_remappings
 RUN_SETTINGS = {"seed": 0, "stall_timeout_s": 5.0, "out_dir": "", "progress": True,
                 "extra_nodes": "", "external_nodes": "", "init_weights": "",
                 "marker_period_ticks": 5, "simulator": "cartpole",
-                "allow_foreign_publishers": False, "rate_hz": 0}
+                "allow_foreign_publishers": False, "rate_hz": 0, "actions": ""}
 # The simulators the project's environment node runs (its setting `simulator`), and external:
 # none is started, one started by someone else is waited for (docs/ENV_CONTRACT.md).
 SIMULATORS = ("cartpole", "gymnasium", "mujoco")
@@ -43,11 +43,11 @@ SET_BY_THE_RUN = {"out_dir": "--out", "extra_nodes": "--bag / --no-record",
 
 # Which node takes which parameter: those it reads, and those its topics' content rules read
 # (graph.content). A node given a parameter of the run that it does not take ignores it.
-ENCODING = ("nsv", "state_vars", "angle_edges_deg", "velocity_edge", "position_edges_m",
+ENCODING = ("task", "nsv", "state_vars", "variable_edges", "angle_edges_deg", "velocity_edge", "position_edges_m",
             "angular_velocity_edges_deg_per_s")
-NETWORK = (*ENCODING, "segments")
+NETWORK = (*ENCODING, "segments", "n_actions")
 STATE_RULE = ("max_steps", "angle_limit_deg", "track_limit_m")
-LEARNING = ("sigma", "omega", "rho_plus", "rho_minus", "punish", "w_max", "w_base", "w_range",
+LEARNING = ("reward_mapping", "sigma", "omega", "rho_plus", "rho_minus", "punish", "w_max", "w_base", "w_range",
             "tie_break", "tagging", "e_flag", "success_counter", "decay_counters",
             "punish_timing", "inference", "explore", "rerandomize_every",
             "rerandomize_fraction", "rerandomize_range")
@@ -60,11 +60,12 @@ RESUME = ("seed", "init_weights", "trials")
 NODE_PARAMETERS = {
     # segments: an action's winner must exist in the network (graph.content.action_problem)
     "environment": (*COMMON, *PHYSICS_PARAMETERS, "max_steps", "marker_period_ticks",
-                    "simulator", "segments", "protocol"),
-    "encoder": (*COMMON, *ENCODING, *STATE_RULE),
-    "reward": (*COMMON, *STATE_RULE, "sigma", "success_counter", *RESUME),
-    "agent": (*COMMON, *NETWORK, *LEARNING, "force", *RESUME, "out_dir"),
-    TRIAL_MANAGER: (*COMMON, *NETWORK, *STATE_RULE, *RESUME, "force", "w_max", "n_angles",
+                    "simulator", "segments", "protocol", "task", "n_actions", "actions"),
+    "encoder": (*COMMON, *ENCODING, *STATE_RULE, "n_actions"),
+    "reward": (*COMMON, *STATE_RULE, "sigma", "omega", "success_counter", "reward_mapping",
+               *RESUME),
+    "agent": (*COMMON, *NETWORK, *LEARNING, *RESUME, "out_dir"),
+    TRIAL_MANAGER: (*COMMON, *NETWORK, *STATE_RULE, *RESUME, "w_max", "n_angles",
                     "angle_span_deg", "protocol", "stall_timeout_s", "out_dir", "progress",
                     "external_nodes", "allow_foreign_publishers", "rate_hz"),
 }
@@ -73,12 +74,9 @@ NODE_PARAMETERS = {
 # holds them equal). Not extra_nodes (the run sets it), nor simulator (the project's node's own
 # setting: an --env-node command's -p simulator:=... must not be overridden).
 ENVIRONMENT_GIVEN = ("tau", *PHYSICS_PARAMETERS, "max_steps", "marker_period_ticks",
-                     "segments", "protocol")
+                     "segments", "protocol", "task", "n_actions")
 # The recorder keeps every value of the run in its bag.
 NODE_PARAMETERS[RECORDER] = tuple(sorted({*Params().to_dict(), *RUN_SETTINGS}))
-
-# The core's task-neutral values (core.task) that the graph's nodes and messages do not carry yet
-NOT_YET_IN_THE_GRAPH = ("task", "n_actions", "reward_mapping", "variable_edges")
 
 COUNT = (1, 2**31 - 1)  # counts travel in the messages' uint32 fields
 POSITIVE = (0.0, sys.float_info.max)  # > 0 (Params refuses 0)
@@ -86,9 +84,11 @@ NON_NEGATIVE = (0.0, sys.float_info.max)
 # name: (description, (lowest, highest) or choices)
 DESCRIPTIONS = {
     "nsv": ("how many state variables are encoded: 1 = pole angle, 2 = angle and cart velocity, "
-            "3 and 4 add cart position and pole angular velocity (or as state_vars says)", (1, 4)),
-    "state_vars": ("the encoded state variables, in input order (any of: "
-                   + ", ".join(STATE_NAMES) + ")", None),
+            "3 and 4 add cart position and pole angular velocity (or as state_vars says; "
+            "another task's: as many as state_vars names)", (1, 2**16 - 1)),
+    "state_vars": ("the encoded state variables, in input order (the cart-pole's: any of "
+                   + ", ".join(STATE_NAMES) + "; another task's: names of variable_edges)",
+                   None),
     "segments": ("dendritic segments per neuron; not given: half the input combinations, the "
                  "paper's 3 for 1 SV and 9 for 2 SV (declared with the count in use)",
                  (1, MAX_SEGMENTS)),
@@ -143,7 +143,9 @@ DESCRIPTIONS = {
     "rerandomize_range": ("re-randomization: a re-drawn weight is w_base + uniform "
                           "[0, rerandomize_range)", NON_NEGATIVE),
     "task": ("the task: cartpole (the paper's and its variants), or another task's name, e.g. "
-             "gymnasium:Acrobot-v1 (not yet run by the graph: clnn-reproduce learn --task)", None),
+             "gymnasium:Acrobot-v1; the environment node's env/task must name it", None),
+    "actions": ("a Gymnasium task with a Box action space: the values the agent may apply, "
+                "e.g. -1,1 ('': a Discrete space's every action, or a known task's own)", None),
     "n_actions": ("actions of the task, one RLN each (the cart-pole's 2: -F, +F)",
                   (2, MAX_ACTIONS)),
     "reward_mapping": ("failure: a reward every sigma successful steps, a punishment when the "
@@ -290,13 +292,11 @@ def run_values(defaults: dict, preset: str | None = None, params_file: Path | No
             raise ParamError(f"{name} is set by run_all ({option}), not as a parameter")
     model = {k: v for k, v in values.items() if k not in RUN_SETTINGS}
     params = params_from_strings(model)  # raises ParamError with one line
-    if changed := [name for name in NOT_YET_IN_THE_GRAPH if name in model and
-                   getattr(params, name) != getattr(Params(), name)]:
-        raise ParamError(f"{changed[0]}: the graph runs the cart-pole with the paper's reward "
-                         f"mapping for now; other tasks: clnn-reproduce learn --task")
     # The nodes get the checked values: rcl refuses e.g. a list mixing ints and floats.
     values.update({k: list(v) if isinstance(v, tuple) else v
                    for k, v in params.to_dict().items() if k in model})
+    if "variable_edges" in model:  # a ROS parameter is no nested list: its text
+        values["variable_edges"] = variable_edges_text(params.variable_edges)
     values["nsv"] = params.nsv  # the count state_vars gives
     for key in set(values) & set(RUN_SETTINGS):
         values[key] = convert_setting(key, values[key])

@@ -30,7 +30,7 @@ import yaml
 from ..bag import message_class
 from ..cli import OneLineArgumentParser
 from ..graph import qos
-from ..graph.names import INPUT_LABELS, SPIKES, TOPIC_TYPES, absolute, graph_topic
+from ..graph.names import INPUT_LABELS, LATCHED, SPIKES, TOPIC_TYPES, absolute, graph_topic
 
 
 class EchoError(Exception):
@@ -177,7 +177,7 @@ def main(argv=None) -> int:
                 printed.append(1)
 
             resolved = node.resolve_topic_name(args.topic)
-            latched = graph_topic(resolved) == INPUT_LABELS  # published once: ask for the last
+            latched = graph_topic(resolved) in LATCHED  # published once: ask for the last
             node.create_subscription(cls, args.topic, show,
                                      qos_profile(qos.LABELS if latched else qos.ECHO))
             if raster is not None and graph_topic(resolved) == SPIKES:

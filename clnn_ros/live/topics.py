@@ -1,6 +1,6 @@
 """List the topics of the running graph with their types, like `ros2 topic list -t`.
 
-    python -m clnn_ros.live.topics            # /cartpole/state [clnn_ros_msgs/msg/CartPoleState]
+    python -m clnn_ros.live.topics            # /env/observation [clnn_ros_msgs/msg/Observation]
     ...
     python -m clnn_ros.live.topics --count    # and how many publishers and subscribers each has
 

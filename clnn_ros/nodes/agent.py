@@ -1,4 +1,4 @@
-"""Agent node: two RLNs. Spike vector + reward of a tick -> three-factor update, inference,
+"""Agent node: one RLN per action of the task (n_actions; the cart-pole's two). Spike vector + reward of a tick -> three-factor update, inference,
 tagging -> action. At the end of each trial it saves its checkpoint (<out_dir>/checkpoint.npz:
 the state the episode resumes from) and publishes its weights. The service
 ~/save_checkpoint (std_srvs/Trigger; /agent/save_checkpoint in the root namespace) saves the state after the last completed tick to
@@ -23,6 +23,7 @@ from std_srvs.srv import Trigger
 from ..core.checkpoint import capture, save_checkpoint
 from ..core.episode import start_episode
 from ..core.rln import KIND_OF_CODE
+from ..graph.fields import ACTION_NONE
 from ..files import describe_write_error
 from ..core.init_weights import episode_start
 from ..graph.lockstep import Refusals, TickJoin
@@ -79,14 +80,11 @@ class AgentNode(Node):
         self.next_trial = reward.trial + 1 if reward.trial_over else reward.trial
         self.trial_step = 0 if reward.trial_over else reward.tick - self.trial_start_tick + 1
         action = self.action_msg
-        if reward.trial_over:  # only learn; force 0 tells the others the trial is over
-            action.force_direction, action.force_n = 0, 0.0
-            action.winning_neuron = action.winning_segment = 0
+        if reward.trial_over:  # only learn; ACTION_NONE tells the others the trial is over
+            action.action, action.winning_segment = ACTION_NONE, 0
         else:
-            neuron, segment = self.agent.act(np.frombuffer(spikes.spikes, dtype=np.uint8))
-            action.force_direction = 1 if neuron else -1
-            action.force_n = self.params.force if neuron else -self.params.force
-            action.winning_neuron, action.winning_segment = neuron, segment
+            action.action, action.winning_segment = self.agent.act(
+                np.frombuffer(spikes.spikes, dtype=np.uint8))
         action.tick, action.trial = reward.tick, reward.trial
         self.action_pub.publish(action)
         if reward.trial_over:

@@ -1,59 +1,41 @@
-"""Environment node: owns the cart-pole, applies actions, publishes the state.
+"""Environment node: owns the task's environment, applies actions, publishes observations.
 
     python -m clnn_ros.nodes.environment --ros-args -p physics:=paper
     python -m clnn_ros.nodes.environment --ros-args -p simulator:=gymnasium
+    python -m clnn_ros.nodes.environment --ros-args -p task:=gymnasium:Acrobot-v1 -p n_actions:=3
 
-The cart-pole (setting `simulator`) is the core's physics as the model parameters say
-(`cartpole`), gymnasium's CartPole-v1 (`gymnasium`: gymnasium.make("CartPole-v1").unwrapped,
-its state set directly at START, stepped with action 0 or 1) or an MJCF plant simulated by
-MuJoCo (`mujoco`: clnn_ros.core.mujoco_physics). The last two keep their own masses, length,
-force, limits and tau (0.02 s: the run's tau must be theirs); their radians become the
-message's degrees.
+The environment (clnn_ros.tasks.environments) is the run's task: the paper's cart-pole
+(setting `simulator`: the core's physics as the model parameters say, `cartpole`; Gymnasium's
+CartPole-v1 itself, `gymnasium`; or an MJCF plant simulated by MuJoCo, `mujoco`: the last two
+keep their own constants and tau, 0.02 s, and their radians become degrees), or any Gymnasium
+task (`task` gymnasium:ID; a Box action space's values in the setting `actions`).
 
-Tick t: on /clock(t) together with either /trial/event START(t) (reset the pole to the trial's
-initial angle) or /rln/action(t-1) (apply the force, one physics step), publish
-/cartpole/state(t), then (at ticks that are multiples of marker_period_ticks) the cart and pole
-drawn for a 3D view on /cartpole/markers(t) (clnn_ros.nodes.markers). Another simulator or a
-robot replaces this node by keeping that contract (docs/ENV_CONTRACT.md; the markers are
-optional there).
+Once, latched: env/task, the task's description (contract version 4). Tick t: on /clock(t)
+together with either /trial/event START(t) (reset for the trial) or /rln/action(t-1) (apply it,
+one step), publish /env/observation(t); the trial is truncated after max_steps successful
+steps. The cart-pole also draws itself for a 3D view on /cartpole/markers(t) at ticks that are
+multiples of marker_period_ticks (clnn_ros.nodes.markers). Another simulator, task or robot
+replaces this node by keeping that contract (docs/ENV_CONTRACT.md; the markers are optional).
 """
 
 from __future__ import annotations
 
-from clnn_ros_msgs.msg import Action, CartPoleState, TrialEvent
+from array import array
+
+from clnn_ros_msgs.msg import Action, Observation, TaskDescription, TrialEvent
 from rclpy.node import Node
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock
 from visualization_msgs.msg import MarkerArray
 
-from ..core.episode import reset_for_trial, trial_start
-from ..core.params import ParamError, Params
-from ..core.physics import CONTINUE, CartPole
-from ..graph.fields import stamp_nanoseconds, tick_nanoseconds, tick_stamp
+from ..graph.fields import ACTION_NONE, stamp_nanoseconds, tick_nanoseconds, tick_stamp
 from ..graph.lockstep import Refusals
-from ..graph.names import ACTION, CLOCK, MARKERS, STATE, TRIAL_EVENT
-from .glue import (LOCKSTEP_QOS, Readiness, checked, declare_run_parameters,
+from ..graph.names import ACTION, CLOCK, MARKERS, STATE, TASK, TRIAL_EVENT
+from ..graph.task_description import Described
+from ..tasks.environments import environment_for
+from .glue import (LABELS_QOS, LOCKSTEP_QOS, Readiness, checked, declare_run_parameters,
                    endpoints_matched, ends_with_the_episode, run_node, use_sim_time)
 from .markers import CartPoleMarkers
-
-
-def simulator(name: str, params: Params):
-    """(the cart-pole, its pole's half-length and track limit in m, for the markers). Those
-    that step their own tau import their engine only when chosen."""
-    if name == "gymnasium":
-        from ..core.gym_physics import GymCartPole
-        cartpole, engine = GymCartPole(), "gymnasium"
-        limits = cartpole.env.length, cartpole.env.x_threshold
-    elif name == "mujoco":
-        from ..core.mujoco_physics import MujocoCartPole
-        cartpole, engine = MujocoCartPole(), "MuJoCo"
-        limits = cartpole.pole_length, cartpole.track_limit_m
-    else:
-        return CartPole(params), params.pole_length, params.track_limit_m
-    if abs(cartpole.tau - params.tau) > 1e-12:
-        raise ParamError(f"tau must be {engine}'s {cartpole.tau} s (one tick = one {engine} "
-                         f"step), got {params.tau}")
-    return (cartpole, *limits)
 
 
 class EnvironmentNode(Node):
@@ -61,9 +43,11 @@ class EnvironmentNode(Node):
         super().__init__("environment", **node_options)
         self.params, settings = declare_run_parameters(self, "environment", run)
         self.tau_ns = tick_nanoseconds(self.params.tau)
-        self.cartpole, pole_half_length_m, track_limit_m = simulator(settings["simulator"],
-                                                                     self.params)
-        self.markers = CartPoleMarkers(pole_half_length_m, track_limit_m)
+        self.env = environment_for(self.params, settings["simulator"], settings["actions"])
+        # the cart-pole draws itself; another task has nothing to draw
+        drawn = hasattr(self.env, "pole_half_length_m") and settings["marker_period_ticks"]
+        self.markers = CartPoleMarkers(self.env.pole_half_length_m, self.env.track_limit_m) \
+            if drawn else None
         self.marker_period = settings["marker_period_ticks"]
         self.tick = 0
         self.trial = -1
@@ -71,13 +55,15 @@ class EnvironmentNode(Node):
         self.trial_over = True  # the first tick is a trial start
         self.over_tick = None  # tick of the last state of the trial that just ended
         self.pending = {}  # this tick's inputs by topic: /clock, and START or the action
-        self.state_msg = CartPoleState()
+        self.state_msg = Observation()
         self.finished, self.failure = Future(), None
         self.refusals = Refusals(self.get_logger().error)
-        self.state_pub = self.create_publisher(CartPoleState, STATE, LOCKSTEP_QOS)
+        self.state_pub = self.create_publisher(Observation, STATE, LOCKSTEP_QOS)
+        self.create_publisher(TaskDescription, TASK, LABELS_QOS).publish(TaskDescription(
+            **Described(self.env.task, self.env.termination_reasons).fields()))
         # the markers have no subscriber in the graph; extra_nodes' (the recorder) are waited for
         self.markers_pub = self.create_publisher(MarkerArray, MARKERS, LOCKSTEP_QOS) \
-            if self.marker_period else None
+            if self.markers else None
         inputs = [self.create_subscription(msg_type, topic, checked(topic, self.params,
                                                                     self.refusals, callback),
                                            LOCKSTEP_QOS)
@@ -118,17 +104,17 @@ class EnvironmentNode(Node):
             self._offer(TRIAL_EVENT, event)
 
     def on_action(self, action: Action) -> None:
-        # force_direction is -1, 0 or +1 (its content rule)
-        if action.force_direction == 0:
+        # the action exists in the network (its content rule)
+        if action.action == ACTION_NONE:
             # The agent's answer to a trial's last state. It travels on its own topic, so it may
             # arrive after the next trial's START and clock: match it by its tick alone.
             if action.tick != self.over_tick:
-                self.refusals.refuse(ACTION, action, "force_direction 0 answers only the last "
-                                                     "state of a trial")
+                self.refusals.refuse(ACTION, action, "ACTION_NONE answers only the last "
+                                                     "observation of a trial")
             else:
                 self.over_tick = None
         elif self.trial_over:
-            self.refusals.refuse(ACTION, action, "the trial is over: no force applies")
+            self.refusals.refuse(ACTION, action, "the trial is over: no action applies")
         elif action.tick + 1 != self.tick:
             self.refusals.refuse(ACTION, action, f"expected the action of tick {self.tick - 1}")
         else:
@@ -145,28 +131,28 @@ class EnvironmentNode(Node):
     def _advance(self) -> None:
         start, action = self.pending.get(TRIAL_EVENT), self.pending.get(ACTION)
         self.pending = {}
-        status = CONTINUE
+        state = self.state_msg  # one message object, refilled each tick (publish copies it)
         if start is not None:
-            reset_for_trial(self.cartpole, start.seed, start.trial,
-                            *trial_start(start.seed, self.params, start.trial,
-                                         start.initial_angle_deg))
+            values = self.env.start(start.seed, start.trial, start.initial_angle_deg)
             self.trial, self.successful_steps = start.trial, 0
+            state.reward, state.terminated, state.truncated, state.termination = 0.0, False, \
+                False, 0
         else:
-            status = self.cartpole.step(1 if action.force_direction > 0 else 0)
-            self.successful_steps += status == CONTINUE
-        self.trial_over = status != CONTINUE or self.successful_steps >= self.params.max_steps
+            values, state.reward, state.terminated, state.truncated, state.termination = \
+                self.env.step(action.action)
+            self.successful_steps += not state.terminated
+            state.truncated = bool(state.truncated) or (
+                not state.terminated and self.successful_steps >= self.params.max_steps)
+        self.trial_over = state.terminated or state.truncated
         if self.trial_over:
             self.over_tick = self.tick
-        state = self.state_msg  # one message object, refilled each tick (publish copies it)
-        (state.cart_position_m, state.cart_velocity_m_per_s, state.pole_angle_deg,
-         state.pole_angular_velocity_deg_per_s) = self.cartpole.state
-        state.failure = status  # the physics status is the message's failure code
+        state.values = array("d", values)  # rclpy takes a float64[] as it stores it
         state.tick, state.trial = self.tick, self.trial
         state.successful_steps = self.successful_steps
         self.state_pub.publish(state)
         if self.markers_pub and self.tick % self.marker_period == 0:
             self.markers_pub.publish(self.markers.serialized(
-                tick_stamp(self.tick, self.tau_ns), state.cart_position_m, state.pole_angle_deg))
+                tick_stamp(self.tick, self.tau_ns), values[0], values[2]))
         self.tick += 1
 
 

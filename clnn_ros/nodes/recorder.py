@@ -41,7 +41,7 @@ from .. import bag
 from ..core.params import ParamError, Params
 from ..files import describe_write_error
 from ..graph import qos
-from ..graph.names import (CLOCK, INPUT_LABELS, OPTIONAL, PER_TICK, RECORDED, RECORDER,
+from ..graph.names import (CLOCK, LATCHED, OPTIONAL, PER_TICK, RECORDED, RECORDER,
                            TOPIC_TYPES, TRIAL_EVENT)
 from ..graph.fields import tick_nanoseconds
 from ..graph.ticks import TICKS_RECORD, TickRanges
@@ -86,7 +86,7 @@ class RecorderNode(Node):
         for topic, type_name in TOPIC_TYPES.items():
             self.subscriptions_by_topic[topic] = self.create_subscription(
                 bag.message_class(type_name), topic, self._receiver(topic),
-                LABELS_QOS if topic == INPUT_LABELS else RECORD_QOS, raw=True)
+                LABELS_QOS if topic in LATCHED else RECORD_QOS, raw=True)
         self.finished = Future()
         self.episode_end_at = None
         self.last_message_at = time.monotonic()

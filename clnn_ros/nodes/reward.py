@@ -1,15 +1,17 @@
-"""Reward node: the success counter. Each state's outcome becomes the paper's 1-hot reward R:
-[0,1] punishment when the step failed, [1,0] a positive reward every sigma successful steps,
-[0,0] otherwise; it also tells the agent when the trial is over.
+"""Reward node: the success counter. Each observation's outcome becomes the rule's 1-hot
+reward R by the run's reward_mapping: the paper's ("failure"), [0,1] punishment when the step
+terminated, [1,0] a positive reward every sigma successful steps, [0,0] otherwise; "goal" (a task
+that terminates at its goal), a reward when it terminates, a punishment every omega steps
+without it. It also tells the agent when the trial is over (terminated or truncated).
 
     python -m clnn_ros.nodes.reward --ros-args -p sigma:=256
 
-Subscribes cartpole/state(t); publishes rln/reward(t). Ends on trial/event EPISODE_END.
+Subscribes env/observation(t); publishes rln/reward(t). Ends on trial/event EPISODE_END.
 """
 
 from __future__ import annotations
 
-from clnn_ros_msgs.msg import CartPoleState, Reward, TrialEvent
+from clnn_ros_msgs.msg import Observation, Reward, TrialEvent
 from rclpy.node import Node
 from rclpy.task import Future
 
@@ -37,7 +39,7 @@ class RewardNode(Node):
         self.reward_msg = Reward()  # one message object, refilled each tick
         self.reward_pub = self.create_publisher(Reward, REWARD, LOCKSTEP_QOS)
         state_sub = self.create_subscription(
-            CartPoleState, STATE,
+            Observation, STATE,
             checked(STATE, self.params, self.refusals, lambda msg: self.join.offer(STATE, msg)),
             LOCKSTEP_QOS)
         self.create_subscription(TrialEvent, TRIAL_EVENT, checked(
@@ -52,17 +54,16 @@ class RewardNode(Node):
 
     def on_tick(self, inbox: dict) -> None:
         msg = inbox[STATE]
-        failed = msg.failure != CartPoleState.FAILURE_NONE
         if msg.trial != self.trial:  # the trial's first state: no step has been taken yet
             self.trial = msg.trial
             self.counter.begin_trial()
             kind = NONE
         else:
-            kind = self.counter.outcome(failed)
+            kind = self.counter.outcome(msg.terminated)
         out = self.reward_msg
         out.tick, out.trial, out.reward_one_hot = msg.tick, msg.trial, ONE_HOT[kind]
         out.success_counter = self.counter.count
-        out.trial_over = failed or msg.successful_steps >= self.params.max_steps
+        out.trial_over = msg.terminated or msg.truncated
         self.reward_pub.publish(out)
 
 

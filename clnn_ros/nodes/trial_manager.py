@@ -4,7 +4,9 @@ trials, ends the episode, reports progress, and detects a stalled graph.
 
     python -m clnn_ros.nodes.trial_manager --ros-args -p seed:=1 -p trials:=32 -p out_dir:=out
 
-Tick t is done when it holds the environment's state(t) and the agent's action(t); then it
+Before the first tick it checks the environment's task (env/task, contract version 4) against
+the run's parameters; a node that speaks an older version is named as such. Tick t is done when
+it holds the environment's observation(t) and the agent's action(t); then it
 publishes clock(t+1), preceded by END/START (or EPISODE_END) events when the trial is over.
 
 What ends an episode early, with exit status 1 and the node to blame:
@@ -31,28 +33,28 @@ from __future__ import annotations
 
 import time
 from collections import Counter
-from pathlib import Path
 
 import numpy as np
-from clnn_ros_msgs.msg import Action, CartPoleState, Reward, SpikeVector, TrialEvent, WeightSnapshot
+from clnn_ros_msgs.msg import (Action, Observation, Reward, SpikeVector, TaskDescription,
+                               TrialEvent, WeightSnapshot)
 from rosgraph_msgs.msg import Clock
 from rclpy.node import Node
 from rclpy.task import Future
 from std_msgs.msg import String, UInt64
 
 from ..core.episode import initial_angles
-from ..files import describe_write_error, write_atomically, write_text_atomically
-from ..graph.fields import (COMPLETED, END_REASONS, summary_json, tick_nanoseconds, tick_stamp,
-                            trials_csv)
+from ..graph.fields import ACTION_NONE, COMPLETED, REACHED_MAX_STEPS, tick_nanoseconds, tick_stamp
 from ..graph.lockstep import Refusals, RunningTime, TickJoin
-from ..graph.names import (ACTION, CLOCK, GRAPH_NODES, NOT_STARTED, PUBLISHED_BY, READY,
-                           RECORDED, RECORDER, REWARD, SPIKES, STATE, TRIAL_EVENT, TRIAL_MANAGER,
-                           WEIGHTS)
+from ..graph.names import (ACTION, CLOCK, ENV_CONTRACT_VERSION, GRAPH_NODES, NOT_STARTED,
+                           OLDER_STATE, PUBLISHED_BY, READY, RECORDED, RECORDER, REWARD, SPIKES,
+                           STATE, TASK, TRIAL_EVENT, TRIAL_MANAGER, WEIGHTS)
+from ..graph.task_description import described, description_problem
 from ..graph.qos import RECORDER_WINDOW
 from ..graph.run import NODE_PARAMETERS, names_list
 from ..graph.watch import another_graph, describe_foreign, foreign_publishers, gone, named_twice
 from ..core.init_weights import episode_start
-from .glue import (LOCKSTEP_QOS, PROGRESS_QOS, READY_QOS, GraphClaim, Pace, Readiness,
+from .trial_files import TrialFiles
+from .glue import (LABELS_QOS, LOCKSTEP_QOS, PROGRESS_QOS, READY_QOS, GraphClaim, Pace, Readiness,
                    SharedNames, checked, declare_run_parameters, endpoints_matched, run_node,
                    steady_clock, use_sim_time)
 
@@ -74,6 +76,8 @@ class TrialManagerNode(Node):
         self.refusals = Refusals(self.get_logger().error)
         self.angles = initial_angles(self.settings["seed"], self.params)
         self.results = []  # (trial, initial angle, steps, end reason)
+        self.files = TrialFiles(self.settings["out_dir"], self.settings["seed"],
+                                self.get_logger().error)
         self.clock_msg = Clock()
         self.final_weights = None
         self.weights_tick = None
@@ -96,13 +100,15 @@ class TrialManagerNode(Node):
         self.named_twice = set()  # graph names two nodes carried once the graph ran
         self.exit_reason = ""
         self.join = TickJoin((STATE, ACTION), self.on_tick, self.refusals)
+        self.task = None  # the environment's (env/task), checked against the run's parameters
+        self.create_subscription(TaskDescription, TASK, self.on_task, LABELS_QOS)
         self.current = {topic: -1 for topic in CHAIN}  # the last tick each topic gave
         self.clock_pub = self.create_publisher(Clock, CLOCK, LOCKSTEP_QOS)
         self.event_pub = self.create_publisher(TrialEvent, TRIAL_EVENT, LOCKSTEP_QOS)
         inputs = [self.create_subscription(
             msg_type, topic, checked(topic, self.params, self.refusals, self.seen(topic)),
             LOCKSTEP_QOS)
-            for msg_type, topic in ((CartPoleState, STATE), (SpikeVector, SPIKES),
+            for msg_type, topic in ((Observation, STATE), (SpikeVector, SPIKES),
                                     (Reward, REWARD), (Action, ACTION))]
         inputs.append(self.create_subscription(WeightSnapshot, WEIGHTS, checked(
             WEIGHTS, self.params, self.refusals, self.on_weights), LOCKSTEP_QOS))
@@ -245,7 +251,19 @@ class TrialManagerNode(Node):
             self.recorder_out = False
             self.recorded_tick = max(self.recorded_tick, self.join.tick)  # its progress comes
 
+    def on_task(self, msg: TaskDescription) -> None:
+        if self.task is None and (problem := description_problem(msg, self.params)):
+            self.stop(1, f"the environment node's task (env/task) does not fit the run: "
+                         f"{problem}")
+        elif self.task is None:
+            self.task = described(msg)
+
     def check_start(self, now: float, running: float) -> None:
+        if self.task is None and self.count_publishers(self.resolve_topic_name(OLDER_STATE)):
+            self.stop(1, f"the environment node speaks contract version 3 or older (it publishes "
+                         f"{OLDER_STATE}, no {TASK}): docs/ENV_CONTRACT.md, \"Versions\", says "
+                         f"what to change for version {ENV_CONTRACT_VERSION}")
+            return
         contested = self.claim.contested()
         hold, give_way = self.names.check(self.shared_names, contested, running)
         if give_way:
@@ -254,7 +272,7 @@ class TrialManagerNode(Node):
         if hold:  # whose announcement? (nodes repeat)
             self.ready.clear()
         missing = self.expected - self.ready
-        if not (missing or hold) and self.matched():
+        if not (missing or hold) and self.matched() and self.task is not None:
             self.started_at = now
             self.advance(0, starts_trial=True)
             return
@@ -268,7 +286,8 @@ class TrialManagerNode(Node):
                              f" s (start it yourself: docs/ENV_CONTRACT.md)")
         elif now - self.last_note >= WAITING_NOTE_S:
             self.last_note = now
-            self.get_logger().warning(f"waiting for {', '.join(sorted(missing)) or 'matching'}")
+            self.get_logger().warning(f"waiting for {', '.join(sorted(missing)) or 'matching'}"
+                                      + ("" if self.task else f", the task on {TASK}"))
 
     def stall_reason(self) -> str:
         """The node whose message for the current tick is missing, first in the chain."""
@@ -308,10 +327,11 @@ class TrialManagerNode(Node):
         state, action = inbox[STATE], inbox[ACTION]
         self.stalled_s = 0.0
         tick = state.tick
-        if action.force_direction != 0:
+        if action.action != ACTION_NONE:
             self.advance(tick + 1, starts_trial=False)
             return
-        reason = END_REASONS[state.failure]
+        reason = self.task.end_reason(state.termination) if state.terminated \
+            else REACHED_MAX_STEPS
         self.trial_end_tick = tick
         self.results.append((self.trial, float(self.angles[self.trial]), state.successful_steps,
                              reason))
@@ -321,7 +341,7 @@ class TrialManagerNode(Node):
             successful_steps=state.successful_steps, end_reason=reason,
             seed=self.settings["seed"]))
         self.report(tick)
-        if problem := self.save(self.write_trials):
+        if problem := self.files.trials(self.results):
             self.stop(1, problem, tick)
         elif self.trial + 1 < len(self.angles):
             self.trial += 1
@@ -343,7 +363,7 @@ class TrialManagerNode(Node):
     def interrupted(self) -> None:
         """Ctrl-C: keep what the run did so far."""
         self.exit_reason = "interrupted"
-        self.save(self.write_results, self.join.tick)
+        self.save_results(self.join.tick)
 
     def stop(self, exit_code: int, reason: str, tick: int | None = None) -> None:
         """End the episode: tell the nodes (run_all or launch stops them if it gives way: the
@@ -357,40 +377,18 @@ class TrialManagerNode(Node):
                 seed=self.settings["seed"],
                 successful_steps=self.results[-1][2] if self.results else 0))
         self.exit_reason = reason
-        if (problem := self.save(self.write_results, tick)) and not exit_code:
+        if (problem := self.save_results(tick)) and not exit_code:
             exit_code, reason = 1, problem
             self.exit_reason = reason
         if exit_code:
             self.get_logger().error(reason)
         self.finished.set_result(exit_code)
 
-    def save(self, write, *args) -> str | None:
-        """Run a writer of out_dir's files; the one-line problem if a file cannot be written
-        (the files written before stay whole)."""
-        if not self.settings["out_dir"]:
-            return None
-        try:
-            write(Path(self.settings["out_dir"]), *args)
-        except OSError as error:
-            self.get_logger().error(describe_write_error(error))
-            return describe_write_error(error)
-        return None
-
-    def write_trials(self, out: Path) -> None:
-        write_text_atomically(out / "trials.csv", trials_csv(
-            [self.settings["seed"], *result] for result in self.results))
-
-    def write_results(self, out: Path, tick: int) -> None:
-        self.write_trials(out)
-        if self.final_weights is not None:
-            def save_weights(temporary: Path) -> None:
-                with open(temporary, "wb") as f:
-                    np.save(f, self.final_weights)
-            write_atomically(out / "final_weights.npy", save_weights)
+    def save_results(self, tick: int) -> str | None:
         wall = time.monotonic() - self.started_at if self.started_at else 0.0
-        write_text_atomically(out / "summary.json", summary_json(
-            self.settings["seed"], [r[2] for r in self.results],
-            tick + 1 if self.started_at else 0, wall, self.exit_reason))
+        return self.files.results(self.results, self.final_weights,
+                                  tick + 1 if self.started_at else 0, wall, self.exit_reason)
+
 
 def main() -> None:
     raise SystemExit(run_node(TrialManagerNode, on_interrupt=TrialManagerNode.interrupted))

@@ -20,7 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.params import ParamError, Params
+from ..core.episode import STARTS_SEED
+from ..core.params import ParamError, Params, variable_edges_text
 from ..core.task import Action, Task, Variable
 
 PREFIX = "gymnasium:"
@@ -177,3 +178,37 @@ def task_params(task: Task, values: dict[str, str] | None = None,
     `values` (text, as a command's options give them), over `base` made the task's."""
     known = KNOWN.get(env_id(task.name))
     return task.params({**dict(known.defaults if known else ()), **(values or {})}, base)
+
+
+class GymnasiumTaskEnvironment:
+    """A Gymnasium task as an environment node runs it (tasks.cartpole.CartPoleEnvironment's
+    calls): trial 0 of seed s resets with seed STARTS_SEED + s, every later trial with None, as
+    core.task_episode does; no named terminations."""
+
+    termination_reasons = ()
+
+    def __init__(self, params: Params, actions: str = ""):
+        self.task, self.env = make(params.task, actions or None)
+        if params.n_actions != len(self.task.actions):  # what it encodes is not its business
+            raise ParamError(f"task {self.task.name} has {len(self.task.actions)} actions "
+                             f"({', '.join(self.task.action_labels)}); n_actions is "
+                             f"{params.n_actions}")
+
+    def start(self, seed: int, trial: int, _initial_angle_deg: float) -> np.ndarray:
+        return self.env.reset(STARTS_SEED + seed if trial == 0 else None)
+
+    def step(self, action: int) -> tuple:
+        return (*self.env.step(action), 0)
+
+
+def run_values(task_name: str, actions: str | None = None) -> dict:
+    """The values of a graph run of `gymnasium:ID` (its parameters' layer under the user's):
+    the task's name, its actions, truncation and reward mapping, and the known task's first
+    encoding (every variable encoded where it has none); ParamError as make()."""
+    task, _ = make(task_name, actions)
+    p = task_params(task)
+    values = {"task": task.name, "n_actions": p.n_actions, "reward_mapping": p.reward_mapping,
+              "max_steps": p.max_steps, "state_vars": ",".join(p.state_vars),
+              "variable_edges": variable_edges_text(p.variable_edges)}
+    known = KNOWN.get(env_id(task_name))
+    return {**values, **dict(known.defaults if known else ()), "actions": actions or ""}
