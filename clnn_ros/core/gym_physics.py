@@ -4,7 +4,7 @@ node (clnn_ros/nodes/environment.py, simulator gymnasium) all drive the very sam
 
 Gymnasium's own constants apply (those of GYM_PHYSICS below); the model's Params do not
 change them. Gymnasium keeps the state in radians (float64); the state seen by the encoder and
-published on /cartpole/state is in degrees: math.degrees(rad).
+published on /env/observation is in degrees: math.degrees(rad).
 
     env = GymCartPole(); env.reset(at_rest(0.5)); status = env.step(1)
     x, x_dot, th_deg, thd_deg = env.state

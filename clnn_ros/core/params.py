@@ -17,7 +17,7 @@ PROTOCOLS = ("paper", "gymnasium")
 # (reaching a goal: a reward when it terminates, a punishment every omega steps without it).
 REWARD_MAPPINGS = ("failure", "goal")
 CARTPOLE = "cartpole"  # Params.task of the paper's cart-pole and its variants
-MAX_ACTIONS = 255  # Action.winning_neuron is a uint8
+MAX_ACTIONS = 255  # Action.action is a uint8 (255: ACTION_NONE, so at most 255 actions)
 GYMNASIUM_MAX_STEPS = 500  # CartPole-v1 truncates an episode at 500 steps
 INTEGRATORS = ("semi_implicit", "euler")
 TIE_BREAKS = ("exact", "index", "random")

@@ -1,11 +1,11 @@
 """Print the live messages of a topic as `ros2 topic echo` does (no ROS CLI is needed: rclpy
 only). Run it against a graph started in another terminal (same ROS_DOMAIN_ID).
 
-    python -m clnn_ros.live.echo /cartpole/state
+    python -m clnn_ros.live.echo /env/observation
     python -m clnn_ros.live.echo /rln/action --once
-    python -m clnn_ros.live.echo /cartpole/state --field pole_angle_deg
+    python -m clnn_ros.live.echo /env/observation --field values
     python -m clnn_ros.live.echo /rln/spikes --flow-style    # {tick: 12, trial: 0, spikes: [0, 1]}
-    python -m clnn_ros.live.echo /cartpole/state --csv       # one line per message, for plotting
+    python -m clnn_ros.live.echo /env/observation --csv       # one line per message, for plotting
     python -m clnn_ros.live.echo /rln/spikes --raster        # one row per tick: tick 12 trial 0
     |..#.|
 
@@ -136,7 +136,7 @@ def main(argv=None) -> int:
                                    description=__doc__.split("\n\n")[0])
     parser.add_argument("topic")
     parser.add_argument("--once", action="store_true", help="print one message and exit")
-    parser.add_argument("--field", help="print only this field, e.g. tick or pole_angle_deg")
+    parser.add_argument("--field", help="print only this field, e.g. tick or values")
     style = parser.add_mutually_exclusive_group()
     style.add_argument("--flow-style", action="store_true",
                        help="YAML with collections inline: {sec: 0, nanosec: 20000000}")

@@ -3,9 +3,9 @@
 
     python -m clnn_ros.nodes.recorder --ros-args -p bag_path:=NAME [--params-file P]
 
-It subscribes raw (the CDR bytes, never decoded) to clock, trial/event, cartpole/state,
+It subscribes raw (the CDR bytes, never decoded) to clock, trial/event, env/observation,
 cartpole/markers, rln/spikes, rln/reward, rln/action and rln/weights (in its namespace) with a deep
-reader queue, and announces "recorder" on _graph/ready once each subscription but the optional
+reader queue, and to the latched env/task and rln/input_labels, and announces "recorder" on _graph/ready once each subscription but the optional
 cartpole/markers' (names.OPTIONAL: an environment of one's own may not publish it) sees its
 publisher (again every second until the first clock); run_all makes the trial manager wait for it
 and every publisher of the graph wait for its subscription (run setting extra_nodes), so the first
