@@ -34,14 +34,13 @@ import yaml
 from . import bag
 from .cli import OneLineArgumentParser
 from .core.checkpoint import Checkpoint, load_checkpoint
-from .core.params import PROTOCOLS, STATE_NAMES, ParamError, Params
+from .core.params import CARTPOLE, PROTOCOLS, STATE_NAMES, ParamError, Params
 from .core.presets import PRESETS
 from .files import cannot_create
 from .graph.fields import COMPLETED
 from .graph.names import NOT_STARTED, PER_TICK, RECORDER, TRIAL_MANAGER, namespace_problem
-from .tasks import gymnasium_task
-from .tasks.gymnasium_task import PREFIX
-from .graph.run import DEMO, ENVIRONMENTS, OWN_TAU, RUN_SETTINGS, default_bag_path, run_values
+from .graph.run import (DEMO, ENVIRONMENTS, OWN_TAU, RUN_SETTINGS, SIMULATORS, default_bag_path,
+                        run_values)
 from .graph.ticks import (RUN_END_NOTE, RUN_LAST_TICK_NOTE, TICKS_RECORD, TickRanges,
                           describe_ranges)
 from .core.init_weights import OPTIMAL, episode_start
@@ -50,6 +49,8 @@ from .session.rosenv import domain_id_problem
 from .processes.supervise import (NODES, Supervisor, fresh_summary, report_failure,
                                   run_separate, say, start_recorder, stop_recorder,
                                   work_directory)
+from .tasks import gymnasium_task
+from .tasks.gymnasium_task import PREFIX
 
 # --env-node: a command starting with one of these runs with run_all's interpreter (its venv).
 PYTHON_NAMES = ("python", "python3")
@@ -213,6 +214,10 @@ def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
     elif args.env_node is None and args.env != "external":
         flags["simulator"] = args.env
     values, params = run_values(defaults, args.preset, args.params_file, options, flags)
+    if params.task != CARTPOLE and args.env in SIMULATORS and args.env_node is None:
+        raise ParamError(f"task {params.task} needs its own environment: --env {PREFIX}ID for a "
+                         f"Gymnasium task, --env-node CMD or --env external for one of yours "
+                         f"(--env {args.env} runs the cart-pole)")
     own_tau = OWN_TAU.get(args.env)
     if own_tau is not None and args.env_node is None and params.tau != own_tau:
         raise ParamError(f"--env {args.env} steps {args.env}'s tau of {own_tau:g} s, got "

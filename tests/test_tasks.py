@@ -254,19 +254,6 @@ def test_learn_refuses_what_a_task_cannot_take_in_one_line(argv, message, tmp_pa
     assert message in err and "\n" not in err
 
 
-@pytest.mark.parametrize("option", ["task=gymnasium:Acrobot-v1", "reward_mapping=goal",
-                                    "variable_edges=a:0"])
-def test_the_graph_refuses_task_values_it_does_not_carry_yet_in_one_line(option):
-    import subprocess
-    import sys
-
-    done = subprocess.run([sys.executable, "-m", "clnn_ros.run_all", "--option", option,
-                           "--trials", "1"], capture_output=True, text=True, timeout=120)
-    assert done.returncode == 2 and done.stdout == ""
-    assert done.stderr.count("\n") == 1 and "the graph runs the cart-pole" in done.stderr \
-        and done.stderr.startswith(f"run_all: error: {option.split('=')[0]}:")
-
-
 def test_sweep_a_gymnasium_task_from_the_command_line(tmp_path, capsys):
     from clnn_ros.reproduce.__main__ import main
 

@@ -312,8 +312,17 @@ def run_values(defaults: dict, preset: str | None = None, params_file: Path | No
 def write_params(path: Path, values: dict) -> Path:
     """The run's description: a params file that gives every node the run's values (each takes
     those it uses)."""
-    path.write_text(yaml.safe_dump({"/**": {"ros__parameters": values}}))
+    path.write_text(yaml.dump({"/**": {"ros__parameters": values}}, Dumper=QuotingDumper))
     return path
+
+
+class QuotingDumper(yaml.SafeDumper):
+    """Every string quoted: rcl's YAML reads a bare y, n, on, off as a bool (a variable named y,
+    LunarLander's height, made state_vars a list mixing strings and a bool)."""
+
+
+QuotingDumper.add_representer(
+    str, lambda dumper, text: dumper.represent_scalar("tag:yaml.org,2002:str", text, style="'"))
 
 
 def node_arguments(params_file: Path, namespace: str) -> list[str]:

@@ -24,6 +24,8 @@ from ..files import cannot_create
 from ..graph.names import (GRAPH_NODES, NOT_STARTED, RECORDER, TRIAL_MANAGER, clock_remappings,
                           namespace_problem)
 from ..graph.run import DEMO, ENVIRONMENTS, RUN_SETTINGS, default_bag_path, run_values, write_params
+from ..tasks import gymnasium_task
+from ..tasks.gymnasium_task import PREFIX
 from .supervise import RECORDER_GRACE_S, SHUTDOWN_GRACE_S, exit_description, unfinished_bag
 
 # launch argument: description; an empty value leaves it out. RUN_VALUES are run values.
@@ -42,7 +44,10 @@ ARGUMENTS = {
                 "starts, truncated at 500 steps)",
     "params_file": "a ROS 2 parameters YAML (/**: ros__parameters: ...)",
     "namespace": "put every node and topic under /NAME/",
-    "env": f"environment node: {', '.join(ENVIRONMENTS)} (default cartpole)",
+    "env": f"environment node: {', '.join(ENVIRONMENTS)} (default cartpole), or any Gymnasium "
+           f"task, {PREFIX}ID (e.g. {PREFIX}Acrobot-v1)",
+    "actions": f"env:={PREFIX}ID with a Box action space: the values the agent may apply, "
+               f"e.g. -1,1",
     "out": "write trials.csv, final_weights.npy, summary.json and the bag here",
     "bag": "the bag directory of the recording (default <out>/bag with out, else "
            "bags/run_<UTC time>)",
@@ -68,8 +73,16 @@ def plan(arguments: dict[str, str], workdir: Path) -> list[NodeLaunch]:
     ParamError with one line."""
     given = {name: value for name, value in arguments.items() if value != ""}
     env = given.get("env", "cartpole")
-    if env not in ENVIRONMENTS:
-        raise ParamError(f"env must be one of {', '.join(ENVIRONMENTS)}, got {env!r}")
+    if env not in ENVIRONMENTS and not env.startswith(PREFIX):
+        raise ParamError(f"env must be one of {', '.join(ENVIRONMENTS)} or {PREFIX}ID, "
+                         f"got {env!r}")
+    defaults = DEMO
+    if env.startswith(PREFIX):  # the task's own values under the user's
+        defaults = {**{k: v for k, v in DEMO.items() if k != "nsv"},
+                    **gymnasium_task.run_values(env, given.get("actions"))}
+    elif "actions" in given:
+        raise ParamError(f"actions declares a Gymnasium task's values (env:={PREFIX}ID), not "
+                         f"env:={env}'s")
     namespace = "/" + given["namespace"].strip("/") if "namespace" in given else "/"
     if "namespace" in given and (problem := namespace_problem(given["namespace"])):
         raise ParamError(f"namespace {given['namespace']!r}: {problem}")
@@ -77,9 +90,9 @@ def plan(arguments: dict[str, str], workdir: Path) -> list[NodeLaunch]:
     if out is not None and (problem := cannot_create(out)):
         raise ParamError(f"out {out}: {problem}")
     flags = {value: given[name] for name, value in RUN_VALUES.items() if name in given}
-    if env != "external":
+    if env in ENVIRONMENTS and env != "external":
         flags["simulator"] = env
-    values, _ = run_values(DEMO, None, Path(given["params_file"]) if "params_file" in given
+    values, _ = run_values(defaults, None, Path(given["params_file"]) if "params_file" in given
                            else None, flags=flags)
     values["out_dir"] = str(out) if out else ""
     remappings = tuple(clock_remappings(namespace))

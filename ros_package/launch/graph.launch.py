@@ -1,7 +1,8 @@
 """The graph that `python -m clnn_ros.run_all` starts, one process per node, with its parameters:
 
     ros2 launch clnn_ros graph.launch.py [seed:=1] [trials:=32] [nsv:=2] [namespace:=robot1]
-        [env:=gymnasium|mujoco|external] [out:=DIR] [params_file:=FILE] [record:=false]
+        [env:=gymnasium|mujoco|external|gymnasium:ID] [actions:=-1,1] [out:=DIR]
+        [params_file:=FILE] [record:=false]
         [bag:=DIR] [stall_timeout:=S]
 
 Each argument is run_all's option of the same name (clnn_ros.processes.launch_plan): run_all checks

@@ -1,0 +1,61 @@
+"""Gymnasium's tasks through the real ROS 2 graph (contract version 4: env/observation, the
+latched env/task, actions by index) against the core's task episode: the same trials and final
+weights, one task of each family Gymnasium builds differently (classic control, Box2D, MuJoCo)."""
+
+from __future__ import annotations
+
+import csv
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from clnn_ros.core.task_episode import run_task_episode
+from clnn_ros.tasks.gymnasium_task import make, task_params
+
+from conftest import free_domain_id, ros_environment
+
+pytestmark = pytest.mark.ros
+DOMAIN_ID = free_domain_id()
+HANG_S = 600  # a bound against a hang, never a speed bound
+
+
+@pytest.fixture(scope="module")
+def ros_env(tmp_path_factory):
+    return ros_environment(DOMAIN_ID, tmp_path_factory)
+
+
+def run_all(env, *args) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "clnn_ros.run_all", "--quiet", *args], env=env,
+                          capture_output=True, text=True, timeout=HANG_S)
+
+
+@pytest.mark.parametrize("task_name, options, composed", [
+    ("gymnasium:Acrobot-v1", [], False),
+    ("gymnasium:Acrobot-v1", [], True),
+    ("gymnasium:LunarLander-v3", [], False),
+    ("gymnasium:InvertedPendulum-v5", ["--actions=-1,1"], False),
+], ids=["acrobot", "acrobot-composed", "lunarlander", "invertedpendulum"])
+def test_a_gymnasium_task_in_the_graph_equals_the_core(ros_env, tmp_path, task_name, options,
+                                                       composed):
+    trials, max_steps, seed = 4, 150, 3
+    result = run_all(ros_env, "--env", task_name, *options, "--seed", str(seed), "--trials",
+                     str(trials), "--max-steps", str(max_steps), "--no-record", "--out",
+                     str(tmp_path), *(["--composed"] if composed else []))
+    assert result.returncode == 0, result.stderr
+    task, env = make(task_name, options[0].split("=")[1] if options else None)
+    core = run_task_episode(seed, task_params(task, {"trials": str(trials),
+                                                     "max_steps": str(max_steps)}), task, env)
+    with open(tmp_path / "trials.csv") as f:
+        rows = list(csv.DictReader(f))
+    # the graph counts a trial's successful steps: those that did not terminate it
+    assert [int(r["steps"]) for r in rows] == (core.steps - core.terminated).tolist()
+    assert [r["end_reason"] == "terminated" for r in rows] == core.terminated.tolist()
+    np.testing.assert_array_equal(np.load(tmp_path / "final_weights.npy"), core.final_weights)
+
+
+def test_a_task_without_its_environment_is_refused_in_one_line(ros_env):
+    result = run_all(ros_env, "--option", "task=gymnasium:Acrobot-v1", "--trials", "1")
+    assert result.returncode == 2 and result.stdout == ""
+    assert result.stderr.count("\n") == 1 and "needs its own environment" in result.stderr
