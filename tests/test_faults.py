@@ -142,7 +142,7 @@ def test_silent_node_is_named_after_the_stall_timeout(ros_env, tmp_path):
 
 
 def test_a_wrong_tick_is_blamed_on_its_sender(ros_env, tmp_path):
-    """The environment publishes the state of tick 2 as tick 3: every receiver refuses it, and
+    """The environment publishes the observation of tick 2 as tick 3: every receiver refuses it, and
     the environment (not the encoder downstream) is named."""
     process = start_run(ros_env, tmp_path, "--stall-timeout", "1",
                         "--env-node", f"python {BROKEN} wrong_tick")
@@ -150,7 +150,7 @@ def test_a_wrong_tick_is_blamed_on_its_sender(ros_env, tmp_path):
     assert process.returncode == 1
     assert problem_lines(stderr) == [
         "run_all: error: stall: node 'environment' went silent at tick 2 (no progress for 1 s; "
-        "last refused cartpole/state: tick 3: expected tick 2)"], stderr[-3000:]
+        "last refused env/observation: tick 3: expected tick 2)"], stderr[-3000:]
 
 
 @pytest.mark.parametrize("command", ["python no_such_file_clnn.py", f"python {BROKEN} crash"],
