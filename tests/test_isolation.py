@@ -142,15 +142,15 @@ def assert_equals_core(out: Path, seed: int):
 
 
 def recorded(out: Path) -> dict[str, list]:
-    """topic -> [(tick, decoded message)] in the order recorded (one
+    """topic -> [(tick, decoded message's repr)] in the order recorded (one
     publisher per topic). Not the log or publish time: they are the wall clock. Not the CDR bytes
     either: Fast CDR leaves the alignment padding between fields uninitialized, so equal messages
-    may differ there."""
+    may differ there. The repr, where a NaN (the cart-pole task's threshold: none) equals itself."""
     from rclpy.serialization import deserialize_message
     by_topic = defaultdict(list)
     for _, topic, tick, _, data, _ in raw_messages(out / "bag"):
         message_type = bag.message_class(names.TOPIC_TYPES[topic])
-        by_topic[topic].append((tick, deserialize_message(data, message_type)))
+        by_topic[topic].append((tick, repr(deserialize_message(data, message_type))))
     return dict(by_topic)
 
 

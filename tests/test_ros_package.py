@@ -169,6 +169,9 @@ def test_launch_arguments_are_run_alls_options(tmp_path):
                 node.log_level, "-r", f"__ns:={node.namespace}",
                 *[f for rule in node.remappings for f in ("-r", ":=".join(rule))]] == \
             node_arguments(node.params_file, node.namespace)
+    acrobot = launch_plan.plan({"env": "gymnasium:Acrobot-v1", "record": "false"}, tmp_path)
+    assert params(acrobot[0].params_file)["task"] == "gymnasium:Acrobot-v1"
+    assert params(acrobot[0].params_file)["n_actions"] == 3
     external = launch_plan.plan({"env": "external", "record": "false"}, tmp_path)
     assert [n.executable for n in external] == list(run_all.NODES[1:])
     assert params(external[0].params_file)["external_nodes"] == "environment"
@@ -176,7 +179,10 @@ def test_launch_arguments_are_run_alls_options(tmp_path):
 
 @pytest.mark.parametrize("arguments, line", [
     ({"nsv": "two"}, "nsv must be an integer, got 'two'"),
-    ({"env": "bullet"}, "env must be one of cartpole, gymnasium, mujoco, external, got 'bullet'"),
+    ({"env": "bullet"}, "env must be one of cartpole, gymnasium, mujoco, external or "
+                        "gymnasium:ID, got 'bullet'"),
+    ({"env": "gymnasium:Nope-v0"}, "gymnasium:Nope-v0: Environment `Nope` doesn't exist"),
+    ({"actions": "-1,1"}, "actions declares a Gymnasium task's values"),
     ({"namespace": "1robot"}, "namespace '1robot': expected letters, digits and _"),
 ])
 def test_bad_launch_arguments_are_one_line(tmp_path, arguments, line):
