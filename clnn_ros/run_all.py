@@ -93,9 +93,8 @@ def parse_args(argv):
                              f"{PREFIX}Acrobot-v1: its first encoding, docs/TASKS.md), or "
                              "external: start none and wait (--stall-timeout) for one that "
                              "someone else starts (a robot's; docs/ENV_CONTRACT.md)")
-    parser.add_argument("--actions", metavar="VALUES",
-                        help=f"--env {PREFIX}ID with a Box action space: the values the agent "
-                             f"may apply, e.g. --actions=-1,1")
+    parser.add_argument("--actions", metavar="VALUES", help=f"--env {PREFIX}ID with a Box action "
+                        f"space: the values the agent may apply, e.g. --actions=-1,1")
     parser.add_argument("--namespace", metavar="NAME",
                         help="put every node and topic under /NAME/ (several graphs on one "
                              "ROS domain)")
@@ -133,8 +132,7 @@ def parse_args(argv):
 def environment_choice(text: str) -> str:
     if text in ENVIRONMENTS or (text.startswith(PREFIX) and len(text) > len(PREFIX)):
         return text
-    raise argparse.ArgumentTypeError(f"invalid choice: {text!r} (choose from "
-                                     f"{', '.join(ENVIRONMENTS)} or {PREFIX}ID)")
+    raise argparse.ArgumentTypeError(f"invalid choice: {text!r} ({', '.join(ENVIRONMENTS)} or {PREFIX}ID)")
 
 
 def check_paths_and_commands(parser: argparse.ArgumentParser, args) -> None:
@@ -204,20 +202,15 @@ def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
     if args.init_weights:  # the nodes get a file by its full path
         flags["init_weights"] = args.init_weights if args.init_weights in OPTIMAL else \
             str(Path(args.init_weights).resolve())
-    defaults = DEMO if checkpoint is None else checkpoint_values(checkpoint)
-    if args.env.startswith(PREFIX):  # the task's own values under the user's
-        defaults = {**{k: v for k, v in defaults.items() if k != "nsv"},
-                    **gymnasium_task.run_values(args.env, args.actions)}
-    elif args.actions is not None:
-        raise ParamError(f"--actions declares the values of a Gymnasium task's Box actions "
-                         f"(--env {PREFIX}ID), not --env {args.env}'s")
-    elif args.env_node is None and args.env != "external":
+    defaults = gymnasium_task.graph_defaults(
+        args.env, DEMO if checkpoint is None else checkpoint_values(checkpoint), args.actions)
+    if args.env_node is None and args.env in SIMULATORS:
         flags["simulator"] = args.env
     values, params = run_values(defaults, args.preset, args.params_file, options, flags)
     if params.task != CARTPOLE and args.env in SIMULATORS and args.env_node is None:
-        raise ParamError(f"task {params.task} needs its own environment: --env {PREFIX}ID for a "
-                         f"Gymnasium task, --env-node CMD or --env external for one of yours "
-                         f"(--env {args.env} runs the cart-pole)")
+        raise ParamError(f"task {params.task} needs its own environment: --env {PREFIX}ID, or "
+                         f"--env-node / --env external for one of yours (--env {args.env}: the "
+                         f"cart-pole)")
     own_tau = OWN_TAU.get(args.env)
     if own_tau is not None and args.env_node is None and params.tau != own_tau:
         raise ParamError(f"--env {args.env} steps {args.env}'s tau of {own_tau:g} s, got "

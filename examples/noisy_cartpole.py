@@ -1,5 +1,5 @@
 """A cart-pole with friction and a noisy actuator, written only against docs/ENV_CONTRACT.md
-(rclpy and the message packages, no clnn_ros code).
+(contract version 4: rclpy and the message packages, no clnn_ros code).
     python -m clnn_ros.run_all --env-node "python examples/noisy_cartpole.py"
     python -m clnn_ros.live.check_env python examples/noisy_cartpole.py --ros-args \\
         -p force_noise:=0.2
@@ -14,11 +14,14 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
-from clnn_ros_msgs.msg import Action, CartPoleState, TrialEvent
+from clnn_ros_msgs.msg import Action, Observation, TaskDescription, TrialEvent
 
 LOCKSTEP = QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE)  # KEEP_LAST, VOLATILE
 READY = QoSProfile(depth=16, reliability=ReliabilityPolicy.RELIABLE,
                    durability=DurabilityPolicy.TRANSIENT_LOCAL)
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+POLE_ANGLE, CART_POSITION = 1, 2  # Observation.termination: 1 + index of termination_reasons
 DEFAULTS = dict(tau=0.02, max_steps=10000, angle_limit_deg=12.0, track_limit_m=2.4, gravity=9.8,
                 cart_mass=0.711, pole_mass=0.209, pole_length=0.326, force=10.0,  # contract's
                 cart_friction=0.0005, pole_friction=2e-6, force_noise=0.1, noise_seed=0)  # own
@@ -32,8 +35,17 @@ class NoisyCartPole(Node):
                   for k, v in DEFAULTS.items()}
         self.rng, self.tau_ns = random.Random(self.p["noise_seed"]), round(self.p["tau"] * 1e9)
         self.tick, self.trial, self.steps, self.over, self.done = 0, 0, 0, True, False
+        self.over_tick = None  # the tick of a trial's last observation, which ACTION_NONE answers
         self.pending, self.s = {}, [0.0, 0.0, 0.0, 0.0]  # x m, dx/dt m/s, theta rad, rad/s
-        self.pub = self.create_publisher(CartPoleState, "cartpole/state", LOCKSTEP)
+        inf, a, x = math.inf, self.p["angle_limit_deg"], self.p["track_limit_m"]
+        self.create_publisher(TaskDescription, "env/task", LATCHED).publish(TaskDescription(
+            contract_version=4, task="cartpole", variable_names=[
+                "cart_position", "cart_velocity", "pole_angle", "pole_angular_velocity"],
+            variable_units=["m", "m/s", "deg", "deg/s"], variable_low=[-x, -inf, -a, -inf],
+            variable_high=[x, inf, a, inf], action_labels=["-F", "+F"], action_values=[-1.0, 1.0],
+            max_steps=self.p["max_steps"], reward_threshold=math.nan, ends_in="failure",
+            termination_reasons=["pole_angle", "cart_position"]))
+        self.pub = self.create_publisher(Observation, "env/observation", LOCKSTEP)
         self.ready = self.create_publisher(String, "_graph/ready", READY)
         # sim time stands still before the first tick: the readiness timer runs on steady time
         self.timer = self.create_timer(0.02, self.announce, clock=RosClock(
@@ -42,7 +54,7 @@ class NoisyCartPole(Node):
                        self.create_subscription(TrialEvent, "trial/event", self.on_event, LOCKSTEP),
                        self.create_subscription(Action, "rln/action", self.on_action, LOCKSTEP)]
 
-    def announce(self):  # encoder, reward and trial manager subscribe to the state; each input
+    def announce(self):  # encoder, reward and trial manager subscribe to observations; each input
         # must know its publisher too (discovery is one-sided: an unmatched reader drops data)
         if self.pub.get_subscription_count() >= 3 and all(
                 s.get_publisher_count() for s in self.inputs):
@@ -68,11 +80,12 @@ class NoisyCartPole(Node):
             else:
                 self.refuse(f"START of tick {e.tick}, angle {e.initial_angle_deg}")
 
-    def on_action(self, a):
-        d = a.force_direction
-        if d not in (-1, 0, 1) or a.tick + 1 != self.tick or (d == 0) != self.over:
-            self.refuse(f"action {a.tick} force_direction {d}")
-        elif d:
+    def on_action(self, a):  # 0: -F, 1: +F; ACTION_NONE answers a trial's last observation
+        if a.action == Action.ACTION_NONE and a.tick == self.over_tick:
+            self.over_tick = None
+        elif a.action not in (0, 1) or a.tick + 1 != self.tick or self.over:
+            self.refuse(f"action {a.action} of tick {a.tick}")
+        else:
             self.offer("action", a)
 
     def offer(self, key, msg):
@@ -84,21 +97,23 @@ class NoisyCartPole(Node):
             self.advance(start, action)
 
     def advance(self, start, action):
-        failure = CartPoleState.FAILURE_NONE
+        termination = 0
         if start:
             self.trial, self.steps = start.trial, 0
             self.s = [0.0, 0.0, math.radians(start.initial_angle_deg), 0.0]
         else:
             noise = 1 + self.p["force_noise"] * self.rng.gauss(0, 1)
-            failure = self.physics(action.force_direction * self.p["force"] * noise)
-            self.steps += failure == CartPoleState.FAILURE_NONE
-        self.over = failure != CartPoleState.FAILURE_NONE or self.steps >= self.p["max_steps"]
+            termination = self.physics((2 * action.action - 1) * self.p["force"] * noise)
+            self.steps += not termination
+        truncated = not termination and self.steps >= self.p["max_steps"]
+        self.over = bool(termination) or truncated
+        if self.over:  # its ACTION_NONE may come after the next START: matched by its tick
+            self.over_tick = self.tick
         x, xd, th, thd = self.s
-        m = CartPoleState(cart_position_m=x, cart_velocity_m_per_s=xd,
-                          pole_angle_deg=math.degrees(th),
-                          pole_angular_velocity_deg_per_s=math.degrees(thd), failure=failure,
-                          successful_steps=self.steps, tick=self.tick, trial=self.trial)
-        self.pub.publish(m)
+        self.pub.publish(Observation(
+            tick=self.tick, trial=self.trial, values=[x, xd, math.degrees(th), math.degrees(thd)],
+            reward=0.0, terminated=bool(termination), truncated=truncated,
+            termination=termination, successful_steps=self.steps))
         self.tick += 1
 
     def physics(self, f):  # Barto et al. (1983) with cart and pole friction, semi-implicit Euler
@@ -112,10 +127,8 @@ class NoisyCartPole(Node):
         thd += p["tau"] * tha
         self.s = [x + p["tau"] * xd, xd, th + p["tau"] * thd, thd]
         if abs(math.degrees(self.s[2])) > p["angle_limit_deg"]:
-            return CartPoleState.FAILURE_POLE_ANGLE
-        if abs(self.s[0]) > p["track_limit_m"]:
-            return CartPoleState.FAILURE_CART_POSITION
-        return CartPoleState.FAILURE_NONE
+            return POLE_ANGLE
+        return CART_POSITION if abs(self.s[0]) > p["track_limit_m"] else 0
 
 
 def stop_at_end_of_stdin(node):  # run_all never writes to our stdin: end of file = it is gone

@@ -1,11 +1,14 @@
-"""Swapping the environment node: the contract checker passes the project's environment nodes
-(paper cart-pole, gymnasium, the example) and fails broken ones with the right explanation; a
+"""Swapping the environment node: the contract checker (contract version 4) passes the
+project's environment nodes (paper cart-pole, gymnasium, a Gymnasium task) and the examples
+(a noisy cart-pole, a task of their own) and fails broken ones with the right explanation, a node
+of version 3 in one line (run_all too); the example task of its own learns through --env-node; a
 gymnasium-node run equals the core driving gymnasium's physics; the encoder edges are
 parameters; `run_all --env external` runs with an environment node started by someone else
 (also in a namespace) and fails with one line when none comes (docs/ENV_CONTRACT.md)."""
 
 from __future__ import annotations
 
+import csv
 import os
 import queue
 import signal
@@ -22,7 +25,8 @@ import yaml
 
 from clnn_ros import run_all
 from clnn_ros.batch import run_batch
-from clnn_ros.check_env.rules import CHECKED_RUN, RUN_PHYSICS, check_physics
+from clnn_ros.check_env.rules import (CHECKED_RUN, RUN_PHYSICS, check_physics, checked_run,
+                                      command_task_options)
 from clnn_ros.live.check_env import RULES
 from clnn_ros.core.encoder import Encoder
 from clnn_ros.core.episode import run_episode
@@ -32,11 +36,18 @@ from clnn_ros.core.physics import CartPole, at_rest
 from clnn_ros.graph.names import ENV_CONTRACT_VERSION, RECORDER
 from clnn_ros.graph.run import ENVIRONMENT_GIVEN
 
-from conftest import HANG_S, assert_run_equals_episode, free_domain_id
+from conftest import HANG_S, assert_run_equals_episode, free_domain_id, problem_lines
 
 ROOT = Path(__file__).resolve().parents[1]
 BROKEN = str(Path(__file__).with_name("broken_env_node.py"))
 PY = sys.executable
+# The example task of its own (examples/point_to_goal.py) as the graph runs it
+POINT_TO_GOAL = ["--option", "task=point_to_goal", "--option", "n_actions=3"]
+POINT_TO_GOAL_RUN = [*POINT_TO_GOAL, "--option", "state_vars=offset,velocity",
+                     "--option", "variable_edges=offset:-0.5,-0.1,0.1,0.5;velocity:-0.2,0.2",
+                     "--option", "reward_mapping=goal", "--option", "sigma=128",
+                     "--option", "omega=128", "--max-steps", "300"]
+OLDER = "the node speaks contract version 3 or older"
 
 
 DOMAIN_ID = free_domain_id()
@@ -51,29 +62,52 @@ CHECKS = {
                   ["check_env_node: all rules pass", "WARN  physics: "]),
     "example": (["python", "examples/noisy_cartpole.py", "--ros-args", "-p", "force_noise:=0.2"],
                 [], ["check_env_node: all rules pass", "WARN  physics: "]),
+    # another task: the command's own -p task:=... is the checker's run; no physics
+    "acrobot": ([PY, "-m", "clnn_ros.nodes.environment", "--ros-args", "-p",
+                 "task:=gymnasium:Acrobot-v1", "-p", "n_actions:=3"], [],
+                ["check_env_node: all rules pass", "SKIP  physics: the task is "
+                 "gymnasium:Acrobot-v1, not the cart-pole", "PASS  termination: "]),
+    # a task of its own, written from docs/ENV_CONTRACT.md alone
+    "point_to_goal": (["python", "examples/point_to_goal.py"], POINT_TO_GOAL,
+                      ["check_env_node: all rules pass", "SKIP  physics: "]),
+    # the same node in a run of the cart-pole: its description does not fit the run
+    "task_mismatch": (["python", "examples/point_to_goal.py"], [],
+                      ["FAIL  task: env/task names task 'point_to_goal', the run's is "
+                       "'cartpole'", "PASS  reset", "PASS  truncation"]),
     # ignores the run's cart_mass: a FAIL that names it, with --physics-from-run
     "default_cart_mass": ([PY, BROKEN, "default_cart_mass"], ["--physics-from-run"],
-                          ["FAIL  physics: ", "PASS  reset", "PASS  failure"]),
+                          ["FAIL  physics: ", "PASS  reset", "PASS  termination", "PASS  task"]),
     "no_reset": ([PY, BROKEN, "no_reset"], [],
                  ["FAIL  reset: successful_steps not reset at START (was 60, published 60)"]),
     # written against version 1 of the contract: the field is named as an older contract's
     "contract_v1": ([PY, BROKEN, "contract_v1"], [],
-                    ["check_env_node: ", "FAIL  lockstep: publishes no cartpole/state"]),
+                    ["check_env_node: ", "FAIL  lockstep: publishes no env/observation"]),
+    # version 3 as the graph sees it: one line
+    "contract_v3": ([PY, BROKEN, "contract_v3"], [], [f"FAIL  task: {OLDER} (it publishes "
+                                                      f"/check_contract_v3/cartpole/state, no "
+                                                      f"env/task)"]),
+    # written against version 3: its import fails
+    "imports_v3": ([PY, "-c", "from clnn_ros_msgs.msg import CartPoleState"], [],
+                   ["FAIL  starts: exited with status 1 before the first tick: ImportError: "]),
+    "task_volatile": ([PY, BROKEN, "task_volatile"], ["--startup-timeout", "5"],
+                      ["FAIL  interface: publishes env/task VOLATILE, not TRANSIENT_LOCAL",
+                       "FAIL  task: no TaskDescription on /check_task_volatile/env/task"]),
     "wrong_tick": ([PY, BROKEN, "wrong_tick"], [],
-                   ["FAIL  lockstep: state tick 3 after action of tick 1", "PASS  reset"]),
-    "several": ([PY, BROKEN, "no_exit,accept_bad_force,silent"], ["--startup-timeout", "3"],
+                   ["FAIL  lockstep: observation tick 3 after action 1 of tick 1",
+                    "PASS  reset"]),
+    "several": ([PY, BROKEN, "no_exit,accept_bad_action,silent"], ["--startup-timeout", "3"],
                 ["FAIL  readiness: no readiness announcement",
-                 "FAIL  refusals: does not refuse an action with force_direction 5",
+                 "FAIL  refusals: does not refuse action 2 (the task has 2 actions)",
                  "FAIL  episode_end: does not exit on EPISODE_END", "PASS  lockstep",
-                 "PASS  successful_steps", "PASS  failure", "PASS  stdin_eof"]),
-    # the example with its state topic remapped to an absolute name: not in its namespace
+                 "PASS  successful_steps", "PASS  termination", "PASS  stdin_eof"]),
+    # the example with its observation topic remapped to an absolute name: not in its namespace
     "absolute_names": (["python", "examples/noisy_cartpole.py", "--ros-args", "-r",
-                        "cartpole/state:=/cartpole/state"], ["--startup-timeout", "3"],
-                       ["FAIL  interface: does not publish /check_absolute_names/cartpole/state "
-                        "(topic names must be relative); it publishes /cartpole/state",
+                        "env/observation:=/env/observation"], ["--startup-timeout", "3"],
+                       ["FAIL  interface: does not publish /check_absolute_names/env/observation "
+                        "(topic names must be relative); it publishes ",
                         "FAIL  readiness: no readiness announcement"]),
 }
-PASSING = ("cartpole", "gymnasium", "example")
+PASSING = ("cartpole", "gymnasium", "example", "acrobot", "point_to_goal")
 
 
 @pytest.fixture(scope="module")
@@ -91,7 +125,7 @@ def checks(ros_env):
          f"/check_{name}", *options, *command],
         cwd=ROOT, env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
         for name, (command, options, _) in CHECKS.items()}
-    return {name: (p.communicate(timeout=180)[0], p.returncode) for name, p in running.items()}
+    return {name: (p.communicate(timeout=300)[0], p.returncode) for name, p in running.items()}
 
 
 @pytest.mark.ros
@@ -110,8 +144,38 @@ def test_checker(checks, name):
     if name == "contract_v1":
         assert lines[0].startswith(f"check_env_node: {PY} {BROKEN} contract_v1 against "
                                    f"environment contract version {ENV_CONTRACT_VERSION} ("), report
-        assert "AttributeError: 'CartPoleState' object has no attribute 'header' (a field of an " \
+        assert "AttributeError: 'Observation' object has no attribute 'header' (a name of an " \
                "older contract: header (version 1); docs/ENV_CONTRACT.md, Versions)" in report
+    if name == "contract_v3":  # one line says it all: no cascade of failures, no SKIP lines
+        assert len(lines) == 3 and lines[-1] == "check_env_node: the node breaks the contract", \
+            report
+        assert f"docs/ENV_CONTRACT.md, \"Versions\", says what to change for version " \
+               f"{ENV_CONTRACT_VERSION}" in lines[1], report
+    if name == "imports_v3":
+        assert "(a name of an older contract: CartPoleState (version 3); docs/ENV_CONTRACT.md, " \
+               "Versions)" in report, report
+    if name == "absolute_names":
+        [interface] = [line for line in lines if line.startswith("FAIL  interface: ")]
+        assert "/env/observation (clnn_ros_msgs/msg/Observation)" in interface, report
+    if name == "acrobot":  # its task, from the command's own -p task:=...
+        assert "task gymnasium:Acrobot-v1, 3 actions)" in lines[0], report
+
+
+def test_the_checkers_run_takes_the_task_from_the_options_or_the_command():
+    """The checker's run file wins over the command's own -p (as run_all's does): the task the
+    command names becomes the run's; the values its harness relies on are its own."""
+    command = [PY, "-m", "clnn_ros.nodes.environment", "--ros-args", "-p",
+               "task:=gymnasium:Acrobot-v1", "-p", "n_actions:=3", "-p", "max_steps:=500"]
+    options = command_task_options(command)
+    assert options == {"task": "gymnasium:Acrobot-v1", "n_actions": "3"}
+    assert command_task_options(["python", "-p", "task:=x"]) == {}  # not a ROS argument
+    values, run = checked_run(options)
+    assert (values["task"], values["n_actions"], values["max_steps"]) == \
+        ("gymnasium:Acrobot-v1", 3, 60)
+    assert (run.task, run.n_actions) == ("gymnasium:Acrobot-v1", 3)
+    assert set(ENVIRONMENT_GIVEN) <= set(values)
+    with pytest.raises(ParamError, match="max_steps is the checker's own"):
+        checked_run({"max_steps": "500"})
 
 
 def steps_of(cartpole: CartPole, directions) -> list:
@@ -244,6 +308,43 @@ def test_graph_encodes_other_angle_edges_from_parameters_only(ros_env, tmp_path)
     assert result.returncode == 0, result.stderr
     core = run_episode(1, Params(angle_edges_deg="-3,0,3", trials=6, max_steps=400))
     assert_run_equals_episode(tmp_path, core)
+
+
+@pytest.mark.ros
+def test_run_all_names_a_node_of_contract_version_3_in_one_line(ros_env, tmp_path):
+    """A node that publishes on cartpole/state and no env/task (version 3, as the graph sees
+    it): the run ends at once, exit 1, with one line that says so, not a wait or a stall."""
+    result = subprocess.run(
+        [PY, "-m", "clnn_ros.run_all", "--no-record", "--namespace", "older", "--trials", "2",
+         "--out", str(tmp_path), "--env-node", f"python {BROKEN} contract_v3"],
+        cwd=ROOT, env=ros_env, capture_output=True, text=True, timeout=HANG_S)
+    assert result.returncode == 1, result.stderr
+    assert problem_lines(result.stderr) == [
+        "run_all: error: the environment node speaks contract version 3 or older (it publishes "
+        "cartpole/state, no env/task): docs/ENV_CONTRACT.md, \"Versions\", says what to change "
+        f"for version {ENV_CONTRACT_VERSION}"], result.stderr[-3000:]
+
+
+@pytest.mark.ros
+def test_a_task_of_its_own_learns_through_env_node(ros_env, tmp_path):
+    """examples/point_to_goal.py, a task the project does not know, through run_all --env-node
+    with the run's options describing it: the run completes and its trials end at the goal
+    (terminated, the task's own reason) or at the cap. How much it learns is measured in
+    docs/ENV_CONTRACT.md, not asserted here (a short run)."""
+    trials = 6
+    result = subprocess.run(
+        [PY, "-m", "clnn_ros.run_all", "--quiet", "--no-record", "--namespace", "point_to_goal",
+         "--env-node", "python examples/point_to_goal.py", *POINT_TO_GOAL_RUN, "--seed", "0",
+         "--trials", str(trials), "--out", str(tmp_path)],
+        cwd=ROOT, env=ros_env, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr[-3000:]
+    with open(tmp_path / "trials.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [int(row["trial"]) for row in rows] == list(range(trials))
+    reasons = Counter(row["end_reason"] for row in rows)
+    assert set(reasons) <= {"at_goal", "max_steps"}, rows
+    assert reasons["at_goal"] >= 1, rows  # seed 0 reaches the goal in trial 2 (a lockstep run)
+    assert all(int(row["steps"]) <= 300 for row in rows), rows
 
 
 # --- run_all --env external -------------------------------------------------------------------

@@ -22,21 +22,26 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import String
 
-from clnn_ros_msgs.msg import Action, CartPoleState, TrialEvent
+from clnn_ros_msgs.msg import Action, Observation, TaskDescription, TrialEvent
 
 from ..graph import qos
 from ..graph.fields import tick_stamp
-from ..graph.names import ACTION, CLOCK, READY, STATE, TRIAL_EVENT
+from ..graph.names import ACTION, CLOCK, OLDER_STATE, READY, STATE, TASK, TRIAL_EVENT
 from ..session.rclpy_session import qos_profile
-from .rules import FORCE_N, NAME, TAU_NS
+from .rules import NAME, TAU_NS
 
-# The message fields of an older environment contract, and which (docs/ENV_CONTRACT.md)
-OLDER_FIELDS = {"header": "version 1", "failed": "version 1", "failure_reason": "version 1"}
+# The names of an older environment contract's messages and fields, and which version had them
+# last (docs/ENV_CONTRACT.md, "Versions"): a node written against it fails on them.
+OLDER_NAMES = {"header": "version 1", "failed": "version 1", "failure_reason": "version 1",
+               "CartPoleState": "version 3", "force_direction": "version 3",
+               "force_n": "version 3", "winning_neuron": "version 3", "failure": "version 3",
+               "FAILURE_NONE": "version 3", "cart_position_m": "version 3"}
 
 LOCKSTEP_QOS = qos_profile(qos.LOCKSTEP)
 READY_QOS = qos_profile(qos.READY)
-QUIET_S = 0.3  # how long "no state may come" is watched
-REPLY_S = 5.0  # how long an answer may take (a state, a parameter service's)
+TASK_QOS = qos_profile(qos.LABELS)  # the graph's subscriptions to env/task
+QUIET_S = 0.3  # how long "no observation may come" is watched
+REPLY_S = 5.0  # how long an answer may take (an observation, a parameter service's)
 # How long the node gets to exit (EPISODE_END, end of stdin): its own exit waits up to 2 s for
 # its last messages' acknowledgements, then deletes its participant; beside CPU hogs a good node
 # took more than 5 s.
@@ -48,20 +53,34 @@ STOP_SIGNALS = ((signal.SIGINT, 3.0), (signal.SIGTERM, 2.0), (signal.SIGKILL, 5.
 
 class Harness(Node):
     """Trial manager + agent, in the checked node's namespace: publishes clock, trial/event and
-    rln/action, reads the states (the graph does not check who sends a message)."""
+    rln/action, reads the task and the observations (the graph does not check who sends a
+    message)."""
 
     def __init__(self, context, namespace: str):
         super().__init__("check_env_node", context=context, namespace=namespace)
         self.clock_pub = self.create_publisher(Clock, CLOCK, LOCKSTEP_QOS)
         self.event_pub = self.create_publisher(TrialEvent, TRIAL_EVENT, LOCKSTEP_QOS)
         self.action_pub = self.create_publisher(Action, ACTION, LOCKSTEP_QOS)
-        self.states: list[CartPoleState] = []
+        self.states: list[Observation] = []
         self.ready: list[str] = []
+        self.tasks: list[TaskDescription] = []
         # three subscriptions: the encoder, reward and trial manager a real graph has
-        self.create_subscription(CartPoleState, STATE, self.states.append, LOCKSTEP_QOS)
+        self.create_subscription(Observation, STATE, self.states.append, LOCKSTEP_QOS)
         for _ in range(2):
-            self.create_subscription(CartPoleState, STATE, lambda _msg: None, LOCKSTEP_QOS)
+            self.create_subscription(Observation, STATE, lambda _msg: None, LOCKSTEP_QOS)
         self.create_subscription(String, READY, lambda m: self.ready.append(m.data), READY_QOS)
+        self.create_subscription(TaskDescription, TASK, self.tasks.append, TASK_QOS)
+
+    def late_task(self) -> list[TaskDescription]:
+        """A subscription to env/task made now, as a node that joins later makes it: what it
+        receives (a latched description, from the publisher's history)."""
+        received = []
+        self.create_subscription(TaskDescription, TASK, received.append, TASK_QOS)
+        return received
+
+    def older_state_publishers(self) -> list:
+        """The publishers on cartpole/state in the namespace: an older contract's node."""
+        return self.get_publishers_info_by_topic(OLDER_STATE)
 
     def clock(self, tick: int) -> None:
         msg = Clock()
@@ -72,9 +91,10 @@ class Harness(Node):
         self.event_pub.publish(TrialEvent(tick=tick, trial=trial, event=kind,
                                           initial_angle_deg=angle))
 
-    def action(self, tick: int, trial: int, direction: int) -> None:
-        self.action_pub.publish(Action(tick=tick, trial=trial, force_direction=direction,
-                                       force_n=FORCE_N * direction))
+    def action(self, tick: int, trial: int, action: int) -> None:
+        """The action of index `action` (Action.ACTION_NONE: the answer to a trial's last
+        observation)."""
+        self.action_pub.publish(Action(tick=tick, trial=trial, action=action))
 
 
 class Probe:
@@ -149,17 +169,18 @@ class Probe:
             if status is not None else ""
 
     def stderr_tail(self) -> str:
-        """': <the last line the process wrote to stderr>', or ''; a field the messages of an
-        older version of the contract had is named as such."""
+        """': <the last line the process wrote to stderr>', or ''; a message or field of an
+        older version of the contract is named as such."""
         self.stderr.flush()
         lines = [line for line in Path(self.stderr.name).read_text(errors="replace").splitlines()
                  if line.strip()]
         if not lines:
             return ""
-        older = [f"{field} ({version})" for field, version in OLDER_FIELDS.items()
-                 if "AttributeError" in lines[-1] and f"'{field}'" in lines[-1]]
+        older = [f"{name} ({version})" for name, version in OLDER_NAMES.items()
+                 if ("AttributeError" in lines[-1] or "ImportError" in lines[-1]) and
+                 f"'{name}'" in lines[-1]]
         return f": {lines[-1].strip()}" + (
-            f" (a field of an older contract: {older[0]}; docs/ENV_CONTRACT.md, Versions)"
+            f" (a name of an older contract: {older[0]}; docs/ENV_CONTRACT.md, Versions)"
             if older else "")
 
     def environment_present(self) -> bool:
@@ -167,7 +188,7 @@ class Probe:
 
     def endpoints(self, which: str) -> str:
         """What the checked node publishes or subscribes ('publishes'/'subscribes'), for a
-        FAIL line: '; it publishes /cartpole/state (clnn_ros_msgs/msg/CartPoleState), ...'."""
+        FAIL line: '; it publishes /env/observation (clnn_ros_msgs/msg/Observation), ...'."""
         lookup = self.node.get_publisher_names_and_types_by_node if which == "publishes" else \
             self.node.get_subscriber_names_and_types_by_node
         try:

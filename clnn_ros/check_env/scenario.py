@@ -1,6 +1,7 @@
-"""The episode the checker plays against the node: a balancing trial up to the max_steps cap
-with malformed inputs in between, a START outside the angle limit, a trial pushed with constant
-+F until it fails, a short trial and EPISODE_END; then a second start whose stdin is closed."""
+"""The episode the checker plays against the node: a trial up to the max_steps cap with
+malformed inputs in between, (the cart-pole: a START outside the angle limit), a trial with the
+last action held until it terminates, a short trial that takes every action, EPISODE_END; then
+a second start whose stdin is closed."""
 
 from __future__ import annotations
 
@@ -8,57 +9,62 @@ import subprocess
 
 from clnn_ros_msgs.msg import TrialEvent
 
-from ..graph.fields import FAILURE_NONE
+from ..core.params import Params
+from ..graph.fields import ACTION_NONE
 from ..graph.names import STATE
 from ..session.process_signals import EXIT_WITH_STDIN
 from .interface import connect
 from .lockstep import Lockstep
 from .probe import APPEAR_S, EXIT_S, Probe
-from .rules import (ANGLE_LIMIT_DEG, MAX_STEPS, NAME, Abort, Findings, check_capped,
-                    check_one_state_per_tick, check_physics)
+from .rules import (ANGLE_LIMIT_DEG, MAX_STEPS, NAME, Abort, Findings,
+                    check_one_observation_per_tick, check_physics)
 
 
-def run_checks(probe: Probe, strict_physics: bool = False) -> Findings:
-    """Every rule of the contract checked against the probe's command (the physics: advice,
-    unless `strict_physics`)."""
+def run_checks(probe: Probe, run: Params, strict_physics: bool = False) -> Findings:
+    """Every rule of the contract checked against the probe's command, in the checker's `run`
+    (the physics: advice, unless `strict_physics`; the cart-pole's only)."""
     findings = Findings(strict_physics)
     with probe.session():
         probe.start_process()
         play = None
         try:
-            connect(probe, findings)
-            play = Lockstep(probe, findings)
+            task = connect(probe, findings, run)
+            play = Lockstep(probe, findings, task, run)
             play_episode(play)
         except Abort:
             pass
         finally:
             probe.stop_process()
-        if play is not None and play.transitions:
+        if play is not None and not play.cartpole:
+            findings.physics_skipped = f"the task is {play.task.task.name}, not the cart-pole"
+        elif play is not None and play.transitions:
             findings.checked.add("physics")
-            findings.fail_all("physics", check_physics(play.transitions))
-        if not findings.problems["starts"]:
+            findings.fail_all("physics", check_physics(play.transitions, run))
+        if not findings.problems["starts"] and not findings.older:
             check_stdin_eof(probe, findings)
         states = list(probe.node.states)
-    findings.fail_all("lockstep", check_one_state_per_tick(states))
+    findings.fail_all("lockstep", check_one_observation_per_tick(states))
     return findings
 
 
 def play_episode(play: Lockstep) -> None:
-    node = play.node
+    node, last = play.node, play.n_actions - 1
     play.quiet("lockstep", f"publishes {STATE} before any clock or START")
     msg = play.start(1.0)
-    # trial 0: balance up to the cap, probing the tick protocol and the refusals
+    # trial 0: up to the cap, probing the tick protocol and the refusals
     bad_inputs = {  # tick: (send a bad input with clock(t), what taking it means)
-        5: (lambda t: node.action(t - 1, play.trial, 5),
-            "does not refuse an action with force_direction 5"),
-        6: (lambda t: node.action(t + 3, play.trial, 1),
+        5: (lambda t: node.action(t - 1, play.trial, play.n_actions),
+            f"does not refuse action {play.n_actions} (the task has {play.n_actions} actions)"),
+        6: (lambda t: node.action(t + 3, play.trial, 0),
             "does not refuse an action of tick 9 at tick 6 (expected tick 5)"),
-        7: (lambda t: node.event(TrialEvent.START, t, play.trial + 1, 0.5),
+        7: (lambda t: node.event(TrialEvent.START, t, play.trial + 1, 0.5 * play.cartpole),
             "does not refuse a START in the middle of a trial"),
+        9: (lambda t: node.action(t - 1, play.trial, ACTION_NONE),
+            "does not refuse ACTION_NONE in the middle of a trial"),
     }
-    while msg.failure == FAILURE_NONE and play.steps < MAX_STEPS:
+    while not play.over(msg) and play.steps < MAX_STEPS:
         t = play.tick
-        direction = play.balance(msg)
+        action = play.policy(msg)
         order = {1: "action first", 2: "clock first"}.get(t, "both")
         if t in bad_inputs:
             send, what = bad_inputs[t]
@@ -66,41 +72,49 @@ def play_episode(play: Lockstep) -> None:
             order = "action only"
         elif t == 8:
             play.expect_refusal("refusals", lambda: (node.clock(t + 3),
-                                                     node.action(t - 1, play.trial, direction)),
+                                                     node.action(t - 1, play.trial, action)),
                                 f"does not refuse clock of tick {t + 3} at tick {t}")
             order = "clock only"
-        if play.tick != t:  # it took the bad input and published a state: follow it
+        if play.tick != t:  # it took the bad input and published an observation: follow it
             msg = play.last
             continue
-        msg = play.step(direction, order)
-    if msg.failure != FAILURE_NONE:
+        msg = play.step(action, order)
+    if msg.terminated:
         play.findings.not_checked(
-            "successful_steps", f"the checker's controller kept the pole up for only "
-                                f"{msg.successful_steps} of the max_steps {MAX_STEPS} steps")
-    else:
-        play.findings.fail_all("successful_steps", check_capped(msg))
+            "truncation", f"the checker's {'controller' if play.cartpole else 'actions'} ended "
+                          f"trial 0 (terminated) after {msg.successful_steps} of the max_steps "
+                          f"{MAX_STEPS} steps")
     play.end_trial()
-    angle, t = ANGLE_LIMIT_DEG + 18.0, play.tick
-    play.expect_refusal("refusals", lambda: (node.event(TrialEvent.START, t, play.trial + 1,
-                                                        angle), node.clock(t)),
-                        f"does not refuse a START with initial_angle_deg {angle:g} (outside "
-                        f"+-{ANGLE_LIMIT_DEG:g})")
-    if play.tick != t:  # it took that START: end that trial too
-        play.end_trial()
-    # trial 1: constant +F until the trial fails
-    msg = play.start(-0.5, "start only" if play.tick == t else "clock first")
-    while msg.failure == FAILURE_NONE and play.steps < MAX_STEPS:
-        msg = play.step(1)
-    play.findings.checked.add("failure")
-    if msg.failure == FAILURE_NONE:
-        play.findings.fail("failure", f"constant +F for max_steps {MAX_STEPS} steps did not "
-                                      f"fail the trial (pole at {msg.pole_angle_deg:.2f} deg, "
-                                      f"cart at {msg.cart_position_m:.2f} m)")
-    play.end_trial()
-    # trial 2: a few steps, then the end of the episode
-    msg = play.start(0.25)
-    for _ in range(3):
-        msg = play.step(play.balance(msg))
+    t = play.tick
+    if play.cartpole:
+        angle = ANGLE_LIMIT_DEG + 18.0
+        play.expect_refusal("refusals", lambda: (node.event(TrialEvent.START, t, play.trial + 1,
+                                                            angle), node.clock(t)),
+                            f"does not refuse a START with initial_angle_deg {angle:g} "
+                            f"(outside +-{ANGLE_LIMIT_DEG:g})")
+        if play.tick != t:  # it took that START: end that trial too
+            play.end_trial()
+    # trial 1: the last action (the cart-pole: +F) until the trial terminates
+    msg = play.start(-0.5, "start only" if play.cartpole and play.tick == t else "clock first")
+    while not play.over(msg) and play.steps < MAX_STEPS:
+        msg = play.step(last)
+    if play.cartpole and not msg.terminated:
+        play.findings.fail("termination", f"constant +F did not terminate trial {play.trial}: "
+                                          f"it {'was truncated' if msg.truncated else 'went on'} "
+                                          f"after {play.steps} steps (max_steps {MAX_STEPS}), "
+                                          f"values {list(msg.values)}")
+    # trial 2: every action in turn, then the end of the episode; its START comes before the
+    # last trial's ACTION_NONE, as it may in a graph
+    msg = play.start(0.25, "before ACTION_NONE")
+    for action in range(max(3, play.n_actions)):
+        if play.over(msg):
+            break
+        msg = play.step(action % play.n_actions)
+    play.check_every_action_applied()
+    if not play.terminated:
+        play.findings.notes["termination"] = f"no trial terminated within max_steps " \
+                                             f"{MAX_STEPS}: a terminating observation was not " \
+                                             f"seen"
     node.event(TrialEvent.EPISODE_END, play.tick - 1, play.trial)
     check_episode_end(play.probe, play.findings)
 

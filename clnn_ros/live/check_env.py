@@ -3,21 +3,26 @@
     python -m clnn_ros.live.check_env python -m clnn_ros.nodes.environment --ros-args -p
     physics:=paper
     python -m clnn_ros.live.check_env python -m clnn_ros.nodes.environment --ros-args -p
-    simulator:=gymnasium
+    task:=gymnasium:Acrobot-v1 -p n_actions:=3
     python -m clnn_ros.live.check_env python examples/noisy_cartpole.py
+    python -m clnn_ros.live.check_env --option task=point_to_goal --option n_actions=3 \
+        python examples/point_to_goal.py
 
 It starts the command in its own process as run_all would (with `--ros-args --params-file
 <file> -r __ns:=/NS -r /clock:=/NS/clock` appended, the file holding every parameter an
-environment takes, as a run's does: max_steps 60 and a cart-pole with masses, length and gravity
-other than the defaults; a pipe on stdin and CLNN_ROS_EXIT_WITH_STDIN=1), in a private ROS_DOMAIN_ID on loopback and in a namespace of its
-own (default /check_env_node: a node that uses absolute topic names fails), and plays trial
-manager and agent against it: a balancing trial up to the max_steps cap, a trial pushed with
-constant +F until it fails, malformed inputs in between, then EPISODE_END; then it starts the
-command once more and closes its stdin. For each rule of the contract it prints PASS or FAIL
-with what the node did wrong. The rule `physics` (the states follow the core's cart-pole with
-the file's physics) is advice, a WARN line, for a simulator of its own (gymnasium, friction, a
-robot); --physics-from-run makes it a rule. Exit status 0 when all pass, 1 otherwise, 2 on a
-usage error.
+environment takes, as a run's does: max_steps 60, the task the options (or the command's own
+-p task:=... -p n_actions:=...) name, the cart-pole by default, with masses, length and gravity
+other than the defaults; a pipe on stdin and CLNN_ROS_EXIT_WITH_STDIN=1), in a private
+ROS_DOMAIN_ID on loopback and in a namespace of its own (default /check_env_node: a node that
+uses absolute topic names fails), reads its task description (env/task) and plays trial manager
+and agent against it: a trial up to the max_steps cap, a trial with the last action held until
+it terminates, malformed inputs in between, a trial that takes every action, then EPISODE_END;
+then it starts the command once more and closes its stdin. For each rule of the contract
+(version 4) it prints PASS or FAIL with what the node did wrong; a node of an older version gets
+one line that says so. The rule `physics` (the cart-pole's observations follow the core's
+cart-pole with the file's physics) is advice, a WARN line, for a simulator of its own
+(gymnasium, friction, a robot); --physics-from-run makes it a rule. Exit status 0 when all pass,
+1 otherwise, 2 on a usage error.
 Only public rclpy. The rules and the checker: clnn_ros.check_env.
 """
 
@@ -31,11 +36,11 @@ from pathlib import Path
 
 from ..session import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
 
-from ..check_env.rules import (CHECKED_RUN, MAX_STEPS, RULES, RUN_PHYSICS, STRICT_PHYSICS,
-                              physics_summary)
+from ..check_env.rules import (MAX_STEPS, RULES, STRICT_PHYSICS, ParamError, checked_run,
+                              command_task_options, run_summary)
 from ..cli import OneLineArgumentParser
 from ..graph.names import ENV_CONTRACT_VERSION, namespace_problem
-from ..graph.run import run_values, write_params
+from ..graph.run import write_params
 from ..session.process_signals import EXIT_WITH_STDIN
 
 __all__ = ["RULES", "main"]
@@ -63,6 +68,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(STRICT_PHYSICS, action="store_true",
                         help="the node simulates the run's cart-pole (its physics parameters): "
                              "a state that does not follow it is a FAIL, not a WARN")
+    parser.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                        help="a value of the checker's run, as run_all's --option: the task, "
+                             "e.g. --option task=my_task --option n_actions=3 (the command's "
+                             "own -p task:=... and -p n_actions:=... count as these)")
     parser.add_argument("command", nargs=argparse.REMAINDER, help="the node's command line")
     args = parser.parse_args(argv)
     if not args.command:
@@ -72,9 +81,18 @@ def main(argv: list[str] | None = None) -> int:
         args.command[0] = sys.executable
     if not 0 <= args.domain_id <= 232:
         parser.error("--domain-id must be 0..232")
-    with tempfile.TemporaryDirectory(prefix="check_env_node_") as tmp:
+    options = command_task_options(args.command)
+    for item in args.option:
+        key, equals, value = item.partition("=")
+        if not equals or not key.strip():
+            parser.error(f"--option expects KEY=VALUE, got {item!r}")
+        options[key.strip()] = value
+    try:
         # what a run's file holds for an environment (graph.run.ENVIRONMENT_GIVEN)
-        values, _ = run_values({"max_steps": MAX_STEPS, **RUN_PHYSICS})
+        values, run = checked_run(options)
+    except ParamError as error:
+        parser.error(str(error))
+    with tempfile.TemporaryDirectory(prefix="check_env_node_") as tmp:
         params_file = write_params(Path(tmp) / "params.yaml", values)
         env = {**os.environ, "ROS_DOMAIN_ID": str(args.domain_id), EXIT_WITH_STDIN: "1",
                "ROS_AUTOMATIC_DISCOVERY_RANGE": os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE",
@@ -82,14 +100,13 @@ def main(argv: list[str] | None = None) -> int:
         env.setdefault("ROS_LOG_DIR", str(Path(tmp) / "ros_log"))
         print(f"check_env_node: {' '.join(args.command)} against environment contract "
               f"version {ENV_CONTRACT_VERSION} (ROS_DOMAIN_ID {args.domain_id}, namespace "
-              f"{args.namespace}, max_steps {MAX_STEPS}, {physics_summary(CHECKED_RUN)})",
-              flush=True)
+              f"{args.namespace}, max_steps {MAX_STEPS}, {run_summary(run)})", flush=True)
         # after the arguments: --help and a usage error need no ROS
         from ..check_env.probe import Probe
         from ..check_env.scenario import run_checks
         findings = run_checks(Probe(args.command, args.namespace, args.domain_id,
                                     args.startup_timeout, params_file, env),
-                              strict_physics=args.physics_from_run)
+                              run, strict_physics=args.physics_from_run)
     ok = findings.report()
     print(f"check_env_node: {'all rules pass' if ok else 'the node breaks the contract'}")
     return 0 if ok else 1

@@ -63,7 +63,7 @@ class EncoderNode(Node):
     def on_observation(self, msg: Observation) -> None:
         if self.task is None:
             self.refusals.refuse(STATE, msg, "no task description (env/task) came first")
-        elif problem := self.task.observation_problem(msg.values, msg.terminated):
+        elif problem := self.task.observation_problem(msg.values):
             self.refusals.refuse(STATE, msg, problem, kind="content")
         else:
             self.join.offer(STATE, msg)

@@ -76,13 +76,7 @@ def plan(arguments: dict[str, str], workdir: Path) -> list[NodeLaunch]:
     if env not in ENVIRONMENTS and not env.startswith(PREFIX):
         raise ParamError(f"env must be one of {', '.join(ENVIRONMENTS)} or {PREFIX}ID, "
                          f"got {env!r}")
-    defaults = DEMO
-    if env.startswith(PREFIX):  # the task's own values under the user's
-        defaults = {**{k: v for k, v in DEMO.items() if k != "nsv"},
-                    **gymnasium_task.run_values(env, given.get("actions"))}
-    elif "actions" in given:
-        raise ParamError(f"actions declares a Gymnasium task's values (env:={PREFIX}ID), not "
-                         f"env:={env}'s")
+    defaults = gymnasium_task.graph_defaults(env, DEMO, given.get("actions"))
     namespace = "/" + given["namespace"].strip("/") if "namespace" in given else "/"
     if "namespace" in given and (problem := namespace_problem(given["namespace"])):
         raise ParamError(f"namespace {given['namespace']!r}: {problem}")

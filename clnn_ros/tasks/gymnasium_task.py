@@ -201,6 +201,19 @@ class GymnasiumTaskEnvironment:
         return (*self.env.step(action), 0)
 
 
+def graph_defaults(environment: str, defaults: dict, actions: str | None) -> dict:
+    """A graph run's defaults for its environment (run_all's --env, the launch's env:=):
+    `defaults` (the demonstration's), with a Gymnasium task's own values (run_values) over them
+    but the cart-pole's nsv; ParamError with one line for actions without such a task."""
+    if environment.startswith(PREFIX):
+        return {**{k: v for k, v in defaults.items() if k != "nsv"},
+                **run_values(environment, actions)}
+    if actions is not None:
+        raise ParamError(f"actions ({actions}) declares the values of a Gymnasium task's Box "
+                         f"action space ({PREFIX}ID), not of {environment}")
+    return defaults
+
+
 def run_values(task_name: str, actions: str | None = None) -> dict:
     """The values of a graph run of `gymnasium:ID` (its parameters' layer under the user's):
     the task's name, its actions, truncation and reward mapping, and the known task's first
