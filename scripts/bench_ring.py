@@ -20,17 +20,16 @@ def ring_messages(kind: str) -> dict:
     if kind == "uint64":
         from std_msgs.msg import UInt64
         return {topic: UInt64() for topic in EDGES}
-    from clnn_ros_msgs.msg import Action, CartPoleState, Reward, SpikeVector
+    from clnn_ros_msgs.msg import Action, Observation, Reward, SpikeVector
     from rosgraph_msgs.msg import Clock
 
     return {
         "clock": Clock(),
-        "state": CartPoleState(cart_position_m=0.01, cart_velocity_m_per_s=0.1,
-                               pole_angle_deg=-0.5, pole_angular_velocity_deg_per_s=3.0,
-                               successful_steps=100),
+        # the cart-pole's observation: cart position, cart velocity, pole angle, angular velocity
+        "state": Observation(values=[0.01, 0.1, -0.5, 3.0], successful_steps=100),
         "spikes": SpikeVector(spikes=[0, 0, 1, 0, 0, 0]),
         "reward": Reward(reward_one_hot=[0, 0], success_counter=100),
-        "action": Action(force_direction=1, force_n=10.0, winning_neuron=1, winning_segment=3),
+        "action": Action(action=1, winning_segment=3),
     }
 
 

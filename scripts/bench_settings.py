@@ -36,8 +36,8 @@ PERIOD_MS = 20.0
 DEADLINE_MS = 20.0
 PACED_TIMEOUT_S = 180
 ROLES = ("environment", "encoder", "reward", "agent", "trial_manager")
-# topic: (publishing role, subscribing roles); the graph's clock, cartpole/state, rln/spikes,
-# rln/reward and rln/action
+# topic: (publishing role, subscribing roles); the graph's clock, env/observation ("state"),
+# rln/spikes, rln/reward and rln/action
 EDGES = {
     "clock": ("trial_manager", ("environment",)),
     "state": ("environment", ("encoder", "reward", "trial_manager")),
@@ -61,6 +61,6 @@ TIME_SOURCES = len(SIM_TIME_NODES)
 # The nodes that run on their own time by default; the "sim time everywhere" runs start them
 # with -p use_sim_time:=true (every node ran so until 2026-12-03), to measure what it costs.
 OWN_TIME_ROLES = tuple(node for node in GRAPH_NODES if node not in SIM_TIME_NODES)
-TYPE_NAMES = {"clock": "rosgraph_msgs/Clock", "state": "clnn_ros_msgs/CartPoleState",
+TYPE_NAMES = {"clock": "rosgraph_msgs/Clock", "state": "clnn_ros_msgs/Observation",
               "spikes": "clnn_ros_msgs/SpikeVector", "reward": "clnn_ros_msgs/Reward",
               "action": "clnn_ros_msgs/Action"}

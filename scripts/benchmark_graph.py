@@ -18,7 +18,7 @@ the ring's, the benchmark's own).
    ring (bench_ring.py): 5 nodes (trial_manager, environment, encoder, reward, agent)
    that exchange exactly the lockstep messages of a tick and do nothing else:
         trial_manager --clock--> environment
-        environment   --state--> encoder, reward, trial_manager
+        environment   --state--> encoder, reward, trial_manager   (state: env/observation)
         encoder       --spikes--> agent, trial_manager
         reward        --reward--> agent, trial_manager
         agent         --action--> environment (for the next tick), trial_manager

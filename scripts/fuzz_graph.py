@@ -17,7 +17,8 @@ sending, and the graph's clock only moves forward), and the graph's EPISODE_END 
 
 Every message is of one category (scripts/fuzz_messages.py: malformed, refused for its content;
 well-formed but of a tick no node is at, refused for its tick), and every subscriber of its
-topic refuses it.
+topic refuses it; but env/task's (TaskDescriptions, latched, without a tick), which every
+subscriber ignores once it holds the run's task, before the first tick.
 
 Not fuzzed: a well-formed message with the tick the real one carries or next to it (a
 duplicate, a reordered one, one that races the real message of the tick, such as a forged
@@ -33,7 +34,7 @@ the ticks follow the live graph). Exit 0 with the report (JSON, to --report or s
 topic the messages sent per category, the subscribers that refuse them (the graph nodes that
 subscribe; the sim-time clock of every node but the trial manager also hears /clock and refuses
 nothing), and the refusals to expect from each of those subscribers by kind ("content",
-"tick"). Exit 1 with one line if the graph does not start, the episode ends before everything
+"tick"; none on env/task: "ignored" counts what they ignore). Exit 1 with one line if the graph does not start, the episode ends before everything
 was sent, or a message was not delivered. Each message is judged as the nodes will see it
 (after a serialization round trip) and must fall in its category, or the fuzzer stops (a fuzzer
 bug).
@@ -59,10 +60,10 @@ from rosgraph_msgs.msg import Clock
 from clnn_ros.core.params import ParamError, Params
 from clnn_ros.graph import qos
 from clnn_ros.graph.content import RULES
-from clnn_ros.graph.names import (ACTION, CLOCK, REWARD, SIM_TIME_NODES, SPIKES, STATE,
+from clnn_ros.graph.names import (ACTION, CLOCK, REWARD, SIM_TIME_NODES, SPIKES, STATE, TASK,
                                   TRIAL_EVENT, TRIAL_MANAGER, WEIGHTS)
 from clnn_ros.session.rclpy_session import make_executor, qos_profile, ros_session
-from fuzz_messages import (FAR, STALE, STALE_FROM, TYPES, WELL_FORMED, MessageMaker, clock_tick,
+from fuzz_messages import (IGNORED, STALE_FROM, TYPES, MessageMaker, clock_tick, judged,
                            schedule)
 
 NODE_NAME = "fuzz_graph"
@@ -74,11 +75,12 @@ ACK_TIMEOUT_S = 10.0
 # fuzzer that left at once, 30 ms after its first message composed, was never named).
 GRAPH_SILENT_S = 30.0
 LOCKSTEP_QOS = qos_profile(qos.LOCKSTEP)
+LATCHED_QOS = qos_profile(qos.LABELS)  # env/task's: its subscribers ask for a latched topic
 # The nodes of the graph that subscribe to each input topic (docs/ROS_GRAPH.md).
 SUBSCRIBERS = {CLOCK: ["environment"], TRIAL_EVENT: ["environment", "encoder", "reward", "agent"],
                STATE: ["encoder", "reward", TRIAL_MANAGER], SPIKES: ["agent", TRIAL_MANAGER],
                REWARD: ["agent", TRIAL_MANAGER], ACTION: ["environment", TRIAL_MANAGER],
-               WEIGHTS: [TRIAL_MANAGER]}
+               WEIGHTS: [TRIAL_MANAGER], TASK: ["encoder", TRIAL_MANAGER]}
 # Who else hears a topic: the sim-time clock (use_sim_time) of SIM_TIME_NODES subscribes to
 # /clock; the fuzzer itself listens to clock and trial/event.
 OTHER_SUBSCRIPTIONS = {CLOCK: len(SIM_TIME_NODES) + 1, TRIAL_EVENT: 1}
@@ -97,8 +99,10 @@ class Fuzzer(Node):
         self.maker = MessageMaker(p, rng)
         self.sent = {topic: Counter() for topic in TYPES}
         self.refusals = {topic: Counter() for topic in TYPES}
-        self.fuzz_publishers = {topic: self.create_publisher(TYPES[topic], topic, LOCKSTEP_QOS)
-                                for topic in TYPES}
+        self.ignored = Counter()  # env/task's fuzz, by category
+        self.fuzz_publishers = {topic: self.create_publisher(
+            TYPES[topic], topic, LATCHED_QOS if topic == TASK else LOCKSTEP_QOS)
+            for topic in TYPES}
         self.episode_ended = False
         self.live = self.live_at = None  # the tick of the last clock of the graph seen; when
         self.fuzzed_ticks = []  # the first and the last live tick it sent messages on
@@ -152,24 +156,18 @@ class Fuzzer(Node):
     def send(self, topic: str, category: str, live: int) -> None:
         msg = self.maker.make(topic, category, live)
         received = deserialize_message(serialize_message(msg), TYPES[topic])  # what nodes see
-        malformed = REFUSED[topic](received, self.p) is not None
-        tick = clock_tick(received, self.maker.tau_ns) if topic == CLOCK else received.tick
-        if category == "stale_tick":
-            in_category = not malformed and 0 <= tick <= live - STALE
-        elif category in WELL_FORMED:
-            in_category = not malformed and live + FAR <= tick <= self.maker.max_tick
-        else:
-            in_category = malformed
-        if topic == TRIAL_EVENT and category in WELL_FORMED:
-            in_category &= received.event == TrialEvent.EPISODE_END
-        if not in_category:
+        kind, tick = judged(topic, category, received, live, self.maker)
+        if kind is None:
             raise AssertionError(f"fuzzer bug: {topic} {category} message {received} at live "
                                  f"tick {live} is not of its category")
-        if not malformed and topic in self.own_ticks:
+        if kind == "tick" and topic in self.own_ticks:
             self.own_ticks[topic].add(tick)
         self.fuzz_publishers[topic].publish(msg)
         self.sent[topic][category] += 1
-        self.refusals[topic]["content" if malformed else "tick"] += 1
+        if kind == IGNORED:  # env/task's: its subscribers took the run's task before the start
+            self.ignored[category] += 1
+        else:
+            self.refusals[topic][kind] += 1
 
     def done(self) -> bool:
         return not any(self.plan.values())
@@ -179,6 +177,7 @@ class Fuzzer(Node):
                 "fuzzed_ticks": self.fuzzed_ticks,
                 "sent": {t: dict(c) for t, c in self.sent.items()},
                 "refusals_per_subscriber": {t: dict(c) for t, c in self.refusals.items()},
+                "ignored": {TASK: dict(self.ignored)},
                 "subscribers": SUBSCRIBERS}
 
 

@@ -4,10 +4,13 @@ every subscriber of its topic refuses it (graph.lockstep.Refusals counts the ref
 and kind):
 
   malformed, refused for its content (kind "content", graph.content), whatever its tick (t):
-    non-finite or out-of-range states or unknown failure codes, wrong-sized or not 1-hot spike
-    vectors, reward codes that are not 1-hot, out-of-range or inconsistent actions or winners
-    that do not exist, wrong-sized or out-of-range weights, unknown event kinds or STARTs
-    outside the angle limit, clocks between two ticks or with nanosec >= 1e9;
+    observations with a non-finite value or reward, more successful steps than max_steps or a
+    termination reason without terminated, wrong-sized or not 1-hot spike vectors, reward codes
+    that are not 1-hot, actions or winning segments that do not exist (or ACTION_NONE with a
+    segment), wrong-sized or out-of-range weights, unknown event kinds or STARTs outside the
+    angle limit, clocks between two ticks or with nanosec >= 1e9 (an observation that does not
+    fit its task, by its count, is refused by the encoder alone, which reads the task: not
+    sent);
   well-formed, refused for its tick (kind "tick"):
     stale_tick     a tick 0..t-STALE (sent only from t >= STALE_FROM), behind every
                    subscriber: the trial manager published clock(t) only once every node had
@@ -25,6 +28,12 @@ and kind):
   EPISODE_END (graph.lockstep.episode_end_problem: the node's current tick or the one before),
   only the environment acts on START (at the tick after a trial end, checked there) and no node
   on END, so a well-formed START or END of another tick is not refused by every subscriber.
+
+env/task (TaskDescription, latched) has no tick: its subscribers (the encoder, the trial
+manager) take the first description, before the first tick, and ignore any later one. Its fuzz,
+sent while the episode runs, is ignored, not refused: descriptions of another contract version,
+of lists that do not pair up, of NaN or inverted bounds, of a task that does not fit the run
+(graph.task_description.description_problem refuses each), and the run's own description again.
 """
 
 from __future__ import annotations
@@ -32,27 +41,35 @@ from __future__ import annotations
 import math
 import random
 
-from clnn_ros_msgs.msg import (Action, CartPoleState, Reward, SpikeVector, TrialEvent,
-                               WeightSnapshot)
+from clnn_ros_msgs.msg import (Action, Observation, Reward, SpikeVector, TaskDescription,
+                               TrialEvent, WeightSnapshot)
 from rosgraph_msgs.msg import Clock
 
 from clnn_ros.core.params import Params
 from clnn_ros.core.rln import ONE_HOT
-from clnn_ros.graph.content import N_NEURONS
-from clnn_ros.graph.fields import (FAILURE_CART_POSITION, FAILURE_POLE_ANGLE, FAILURE_REASONS,
-                                   NANOSECONDS, stamp_nanoseconds, tick_nanoseconds)
-from clnn_ros.graph.names import ACTION, CLOCK, REWARD, SPIKES, STATE, TRIAL_EVENT, WEIGHTS
+from clnn_ros.graph.content import RULES
+from clnn_ros.core.task import cartpole_task
+from clnn_ros.graph.fields import (ACTION_NONE, CARTPOLE_TERMINATIONS, NANOSECONDS,
+                                   stamp_nanoseconds, tick_nanoseconds)
+from clnn_ros.graph.names import (ACTION, CLOCK, REWARD, SPIKES, STATE, TASK, TRIAL_EVENT,
+                                  WEIGHTS)
+from clnn_ros.graph.task_description import Described, description_problem
 
-TYPES = {CLOCK: Clock, TRIAL_EVENT: TrialEvent, STATE: CartPoleState, SPIKES: SpikeVector,
-         REWARD: Reward, ACTION: Action, WEIGHTS: WeightSnapshot}
+TYPES = {CLOCK: Clock, TRIAL_EVENT: TrialEvent, STATE: Observation, SPIKES: SpikeVector,
+         REWARD: Reward, ACTION: Action, WEIGHTS: WeightSnapshot, TASK: TaskDescription}
+TICKED = (CLOCK, TRIAL_EVENT, STATE, SPIKES, REWARD, ACTION, WEIGHTS)  # refused by tick or content
 WELL_FORMED = ("stale_tick", "far_tick", "foreign_graph")
 MALFORMED = {CLOCK: ("between_ticks", "nanosec_overflow"),
              TRIAL_EVENT: ("unknown_kind", "non_finite_angle", "angle_out_of_range"),
-             STATE: ("non_finite", "out_of_range", "unknown_failure"),
+             STATE: ("non_finite", "too_many_steps", "reason_not_terminated"),
              SPIKES: ("wrong_size", "not_one_hot"),
              REWARD: ("both_lines", "not_binary"),
-             ACTION: ("out_of_range", "non_finite_force", "inconsistent_force", "no_such_neuron"),
-             WEIGHTS: ("wrong_size", "non_finite", "out_of_range")}
+             ACTION: ("no_such_action", "no_such_segment", "none_with_segment"),
+             WEIGHTS: ("wrong_size", "non_finite", "out_of_range"),
+             TASK: ("other_version", "unpaired_lists", "bad_bounds", "not_the_runs_task")}
+# env/task's fuzz that is a description of the run's own task (taken, were it the first)
+TASK_COPY = "the_runs_own"
+IGNORED = "ignored"  # what env/task's subscribers do with its fuzz (judged)
 STALE = 5  # a stale tick is at least this far behind the live tick
 STALE_FROM = 10  # stale ticks are sent from this live tick on
 FAR = 10_000_000  # a far or foreign tick is at least this far ahead of the live tick
@@ -69,9 +86,12 @@ class MessageMaker:
         self.max_tick = INT32_MAX * NANOSECONDS // self.tau_ns  # the last tick /clock can carry
         self.n_angle_inputs = len(p.angle_edges_deg) + 1
         self.foreign_phase = rng.randint(FAR, 2 * FAR)  # the other graph's lead, in ticks
+        self.task = Described(cartpole_task(p), CARTPOLE_TERMINATIONS)  # the run's, described
         self.foreign_trial0 = rng.randint(0, 10_000)
 
     def make(self, topic: str, category: str, live: int):
+        if topic == TASK:
+            return self._TaskDescription(category)
         tick = self.tick(category, live)
         msg = getattr(self, "_" + TYPES[topic].__name__)(tick, category)
         if topic != CLOCK:
@@ -115,34 +135,31 @@ class MessageMaker:
                 else rng.choice([-1, 1]) * rng.uniform(limit, 1e6)
         return msg
 
-    def _CartPoleState(self, _tick: int, category: str) -> CartPoleState:
+    def _Observation(self, _tick: int, category: str) -> Observation:
+        """The cart-pole's observation (its variables' order, its bounds): a well-formed one
+        fits the run's task (the encoder checks it), a malformed one breaks a content rule."""
         rng, p = self.rng, self.p
-        msg = CartPoleState(cart_position_m=rng.uniform(-0.9, 0.9) * p.track_limit_m,
-                            cart_velocity_m_per_s=rng.uniform(-3, 3),
-                            pole_angle_deg=rng.uniform(-0.9, 0.9) * p.angle_limit_deg,
-                            pole_angular_velocity_deg_per_s=rng.uniform(-100, 100),
-                            successful_steps=rng.randint(0, p.max_steps))
-        if category in WELL_FORMED and rng.random() < 0.2:  # a trial's failing state
-            msg.failure = rng.choice([FAILURE_POLE_ANGLE, FAILURE_CART_POSITION])
-            if msg.failure == FAILURE_POLE_ANGLE:
-                msg.pole_angle_deg = rng.choice([-1, 1]) * rng.uniform(p.angle_limit_deg, 30)
+        values = [rng.uniform(-0.9, 0.9) * p.track_limit_m, rng.uniform(-3, 3),
+                  rng.uniform(-0.9, 0.9) * p.angle_limit_deg, rng.uniform(-100, 100)]
+        msg = Observation(reward=rng.choice([0.0, 1.0]), truncated=rng.random() < 0.05,
+                          successful_steps=rng.randint(0, p.max_steps))
+        if category in WELL_FORMED and rng.random() < 0.2:  # a trial's terminating observation
+            msg.terminated, msg.truncated = True, False
+            msg.termination = rng.randint(1, len(CARTPOLE_TERMINATIONS))
+            if CARTPOLE_TERMINATIONS[msg.termination - 1] == "pole_angle":
+                values[2] = rng.choice([-1, 1]) * rng.uniform(p.angle_limit_deg, 30)
             else:
-                msg.cart_position_m = rng.choice([-1, 1]) * rng.uniform(p.track_limit_m, 3)
+                values[0] = rng.choice([-1, 1]) * rng.uniform(p.track_limit_m, 3)
         elif category == "non_finite":
-            setattr(msg, rng.choice(["cart_position_m", "cart_velocity_m_per_s", "pole_angle_deg",
-                                     "pole_angular_velocity_deg_per_s"]), rng.choice(NON_FINITE))
-        elif category == "out_of_range":
-            which = rng.randrange(3)
-            if which == 0:
-                msg.pole_angle_deg = rng.choice([-1, 1]) * rng.uniform(p.angle_limit_deg + 0.01,
-                                                                       180)
-            elif which == 1:
-                msg.cart_position_m = rng.choice([-1, 1]) * rng.uniform(p.track_limit_m + 0.01,
-                                                                         1e3)
+            if rng.random() < 0.8:
+                values[rng.randrange(len(values))] = rng.choice(NON_FINITE)
             else:
-                msg.successful_steps = p.max_steps + rng.randint(1, 1000)
-        elif category == "unknown_failure":
-            msg.failure = rng.randint(len(FAILURE_REASONS), 255)
+                msg.reward = rng.choice(NON_FINITE)
+        elif category == "too_many_steps":
+            msg.successful_steps = p.max_steps + rng.randint(1, 1000)
+        elif category == "reason_not_terminated":
+            msg.termination = rng.randint(1, 255)
+        msg.values = values
         return msg
 
     def _SpikeVector(self, _tick: int, category: str) -> SpikeVector:
@@ -177,33 +194,27 @@ class MessageMaker:
 
     def _Action(self, _tick: int, category: str) -> Action:
         rng, p = self.rng, self.p
-        # well-formed: -F, +F, or force 0 (the answer to a trial's last state)
-        direction = rng.choice([-1, 0, 1]) if category in WELL_FORMED else rng.choice([-1, 1])
-        msg = Action(force_direction=direction, force_n=direction * p.force,
-                     winning_neuron=int(direction > 0),
-                     winning_segment=rng.randrange(p.n_segments) if direction else 0)
-        if category == "out_of_range":
-            msg.force_direction = rng.choice([-1, 1]) * rng.randint(2, 127)
-            msg.force_n = msg.force_direction * p.force
-        elif category == "non_finite_force":
-            msg.force_n = rng.choice(NON_FINITE)
-        elif category == "inconsistent_force":
-            msg.force_n += rng.choice([-1, 1]) * rng.uniform(0.5, 5)
-        elif category == "no_such_neuron":
-            if rng.random() < 0.5:
-                msg.winning_neuron = rng.randint(N_NEURONS, 255)
-            else:
-                msg.winning_segment = rng.randint(p.n_segments, 255)
+        # well-formed: an action, or ACTION_NONE (the answer to a trial's last observation)
+        if category in WELL_FORMED and rng.random() < 0.2:
+            return Action(action=ACTION_NONE, winning_segment=0)
+        msg = Action(action=rng.randrange(p.n_actions),
+                     winning_segment=rng.randrange(p.n_segments))
+        if category == "no_such_action":
+            msg.action = rng.randint(p.n_actions, ACTION_NONE - 1)
+        elif category == "no_such_segment":
+            msg.winning_segment = rng.randint(p.n_segments, 255)
+        elif category == "none_with_segment":
+            msg.action, msg.winning_segment = ACTION_NONE, rng.randint(1, 255)
         return msg
 
     def _WeightSnapshot(self, _tick: int, category: str) -> WeightSnapshot:
         rng, p = self.rng, self.p
-        shape = [N_NEURONS, p.n_segments, p.n_inputs]
+        shape = [p.n_actions, p.n_segments, p.n_inputs]
         if category == "wrong_size":
             shape[rng.randrange(3)] += rng.choice([-1, 1])
         weights = [rng.uniform(0, p.w_max) for _ in range(math.prod(shape))]
         if category == "wrong_size" and rng.random() < 0.5:  # the right shape, a wrong length
-            shape = [N_NEURONS, p.n_segments, p.n_inputs]
+            shape = [p.n_actions, p.n_segments, p.n_inputs]
         if category == "non_finite":
             weights[rng.randrange(len(weights))] = rng.choice(NON_FINITE)
         elif category == "out_of_range":
@@ -213,11 +224,46 @@ class MessageMaker:
                               weights=weights)
 
 
+    def _TaskDescription(self, category: str) -> TaskDescription:
+        """The run's own task (the cart-pole with its limits), as its environment describes it,
+        or one broken as `category` says."""
+        rng = self.rng
+        fields = self.task.fields()
+        if category == "other_version":
+            fields["contract_version"] = rng.choice([0, 1, 2, 3, 5, 65535])
+        elif category == "unpaired_lists":
+            key = rng.choice(["variable_names", "variable_units", "variable_low",
+                              "variable_high", "action_labels", "action_values"])
+            fields[key] = fields[key][:-1] if rng.random() < 0.5 else \
+                fields[key] + fields[key][:1]
+        elif category == "bad_bounds":
+            which = rng.randrange(len(fields["variable_low"]))
+            if rng.random() < 0.5:
+                fields["variable_low" if rng.random() < 0.5 else "variable_high"][which] = \
+                    math.nan
+            else:
+                fields["variable_low"][which], fields["variable_high"][which] = 1.0, -1.0
+        elif category == "not_the_runs_task":
+            which = rng.randrange(3)
+            if which == 0:  # a third action: not the run's two neurons
+                fields["action_labels"] = fields["action_labels"] + ["none"]
+                fields["action_values"] = fields["action_values"] + [0.0]
+            elif which == 1:  # another task's name
+                fields["task"] = rng.choice(["gymnasium:CartPole-v1", "robot", ""])
+            else:  # no pole angle, the variable the run encodes
+                for key in ("variable_names", "variable_units", "variable_low",
+                            "variable_high"):
+                    del fields[key][2]
+        return TaskDescription(**fields)
+
+
 def schedule(per_topic: int, rng: random.Random) -> dict[str, list[str]]:
-    """For every topic, the categories of its messages: all of them equally often, shuffled."""
+    """For every topic, the categories of its messages: all of them equally often, shuffled
+    (env/task's: its malformed ones and the run's own)."""
     plan = {}
     for topic in TYPES:
-        categories = (*MALFORMED[topic], *WELL_FORMED)
+        categories = (*MALFORMED[topic], TASK_COPY) if topic == TASK else \
+            (*MALFORMED[topic], *WELL_FORMED)
         plan[topic] = [categories[i % len(categories)] for i in range(per_topic)]
         rng.shuffle(plan[topic])
     return plan
@@ -225,3 +271,26 @@ def schedule(per_topic: int, rng: random.Random) -> dict[str, list[str]]:
 
 def clock_tick(msg: Clock, tau_ns: int) -> int:
     return stamp_nanoseconds(msg.clock.sec, msg.clock.nanosec) // tau_ns
+
+
+def judged(topic: str, category: str, received, live: int,
+           maker: MessageMaker) -> tuple[str | None, int | None]:
+    """(what every subscriber of `topic` does with a fuzz message as it receives it: "content"
+    or "tick", the kind of its refusal, IGNORED for env/task's; None where the message is not
+    of its category, a fuzzer bug) and its tick (None for env/task's)."""
+    if topic == TASK:
+        fits = description_problem(received, maker.p) is None
+        return (IGNORED if fits == (category == TASK_COPY) else None), None
+    malformed = RULES[topic](received, maker.p) is not None
+    tick = clock_tick(received, maker.tau_ns) if topic == CLOCK else received.tick
+    if category == "stale_tick":
+        in_category = not malformed and 0 <= tick <= live - STALE
+    elif category in WELL_FORMED:
+        in_category = not malformed and live + FAR <= tick <= maker.max_tick
+    else:
+        in_category = malformed
+    if topic == TRIAL_EVENT and category in WELL_FORMED:
+        in_category &= received.event == TrialEvent.EPISODE_END
+    if topic == STATE and not malformed:  # the encoder checks it against the task too
+        in_category &= maker.task.observation_problem(received.values) is None
+    return ("content" if malformed else "tick") if in_category else None, tick

@@ -21,6 +21,7 @@ from clnn_ros.analysis.data import metadata_record
 from clnn_ros.analysis.summary import environment_lines
 from clnn_ros.bag import open_bag
 from clnn_ros.core.params import Params
+from clnn_ros.core.task import Variable, cartpole_task
 from clnn_ros.figures import plt
 
 from conftest import HANG_S, free_domain_id, ros_environment
@@ -32,6 +33,11 @@ LABELS = [f"pole_angle[{lo},{hi})deg" for lo, hi in
 PNGS = ("learning_curve.png", "traces.png", "raster.png", "weights.png", "weights_history.png")
 ANIMATED = 0  # the sample's trial 0: 34 ticks, 34 frames
 CHOSEN = 11   # 769 ticks, ends at the cart position limit: an overview, two windows, a punishment
+CARTPOLE = cartpole_task(Params()).variables  # the paper's limits: +-2.4 m, +-12 deg
+# Another task's (Acrobot-v1's as Gymnasium describes it)
+ACROBOT = tuple(Variable(name, unit, -bound, bound) for name, unit, bound in (
+    ("cos_theta1", "", 1.0), ("sin_theta1", "", 1.0), ("cos_theta2", "", 1.0),
+    ("sin_theta2", "", 1.0), ("theta1_dot", "rad/s", 12.566), ("theta2_dot", "rad/s", 28.274)))
 
 
 def analyze(*args, cwd=None):
@@ -62,7 +68,24 @@ def series(ticks: int, amplitude: float = 0.1, start: int = 0) -> pictures.Trial
     return pictures.TrialSeries(
         trial=3, ticks=start + np.arange(ticks), states=np.stack([wave] * 4, axis=1),
         spikes=spikes, input_labels=LABELS, actions=np.where(wave < 0, 1, -1),
-        reinforcement=reinforcement, steps=ticks - 1, end_reason="pole_angle")
+        reinforcement=reinforcement, steps=ticks - 1, end_reason="pole_angle",
+        variables=CARTPOLE)
+
+
+def acrobot_series(ticks: int) -> pictures.TrialSeries:
+    """Another task's trial: six variables swinging, three actions by index (NaN: none on the
+    last tick), as a bag of contract version 4 gives them."""
+    wave = np.sin(np.arange(ticks) * 2 * np.pi / 10)
+    actions = np.where(wave < -0.3, 0.0, np.where(wave > 0.3, 2.0, 1.0))
+    actions[-1] = np.nan
+    spikes = np.zeros((6, ticks), dtype=np.uint8)
+    spikes[np.where(wave < 0, 0, 1), np.arange(ticks)] = 1
+    return pictures.TrialSeries(
+        trial=0, ticks=np.arange(ticks), states=np.stack([wave * k for k in (1, 1, 0.5, 0.5, 3, 6)],
+                                                        axis=1),
+        spikes=spikes, input_labels=LABELS, actions=actions,
+        reinforcement=np.zeros(ticks, dtype=int), steps=ticks - 1, end_reason="max_steps",
+        variables=ACROBOT, action_labels=("0", "1", "2"))
 
 
 # --- the files --------------------------------------------------------------------------------
@@ -152,7 +175,7 @@ def test_weights_history_draws_every_weight_from_every_snapshot():
 
 def test_traces_follow_the_motion_in_ticks():
     for amplitude, limits_drawn in ((0.1, False), (2.3, True)):
-        fig = pictures.traces_figure(series(500, amplitude), 12.0, 2.4, "traces")
+        fig = pictures.traces_figure(series(500, amplitude), "traces")
         try:
             position, velocity, angle, _, action, reward = fig.axes
             low, high = position.get_ylim()
@@ -170,7 +193,7 @@ def test_traces_follow_the_motion_in_ticks():
 
 
 def test_a_long_trial_is_drawn_by_columns():
-    fig = pictures.traces_figure(series(10_001), 12.0, 2.4, "traces")
+    fig = pictures.traces_figure(series(10_001), "traces")
     try:
         assert "range (shaded) and the mean" in fig.axes[0].get_title(loc="left")
         assert all(len(ax.get_lines()) == 0 for ax in fig.axes[:4])  # no 10,000-point lines
@@ -201,6 +224,90 @@ def test_raster_of_a_short_trial_is_one_window():
         assert len([ax for ax in fig.axes if ax.get_images()]) == 1
         assert not any(ax.collections and ax.collections[0].get_array() is not None and
                        ax.collections[0].get_array().ndim == 2 for ax in fig.axes)
+    finally:
+        plt.close(fig)
+
+
+def test_another_tasks_traces_have_a_panel_per_variable_and_its_actions():
+    """A panel per variable, labelled with its name and unit; its bounds drawn where the motion
+    comes near them; the action axis by the task's labels; a long trial's actions as the share
+    of ticks each one took per column (no mean of unordered actions)."""
+    fig = pictures.traces_figure(acrobot_series(500), "traces")
+    try:
+        *panels, action, reward = fig.axes
+        assert [ax.get_ylabel() for ax in panels] == [
+            "cos theta1", "sin theta1", "cos theta2", "sin theta2", "theta1 dot (rad/s)",
+            "theta2 dot (rad/s)"]
+        assert panels[0].get_legend() is not None  # +-1 reached: the bounds drawn
+        assert "bounds ±12.566 rad/s: off this scale" == panels[4].get_title(loc="right")
+        assert [t.get_text() for t in action.get_yticklabels()] == ["0", "1", "2"]
+        assert "no reward or punishment" in reward.texts[0].get_text()
+    finally:
+        plt.close(fig)
+    fig = pictures.traces_figure(acrobot_series(3000), "traces")
+    try:
+        action = fig.axes[6]
+        shares = action.collections[0].get_array()
+        assert shares.shape == (3, 120)  # actions x columns of 25 ticks
+        assert np.allclose(shares.sum(axis=0)[:-1], 1.0)  # each column's ticks, all actions
+        assert "share" in action.get_ylabel()
+    finally:
+        plt.close(fig)
+
+
+def test_another_tasks_raster_labels_its_actions():
+    fig = pictures.raster_figure(acrobot_series(1000), "raster")
+    try:
+        overview_action = fig.axes[1]
+        assert [t.get_text() for t in overview_action.get_yticklabels()] == ["0", "1", "2"]
+        assert overview_action.collections[0].get_array().shape == (3, 40)
+        windows = [ax for ax in fig.axes if ax.get_ylabel() == "action" and ax.lines]
+        assert [t.get_text() for t in windows[0].get_yticklabels()] == ["0", "1", "2"]
+    finally:
+        plt.close(fig)
+
+
+def test_another_tasks_learning_curve_has_its_ends_and_returns():
+    rows = [[0, trial, 0.0, steps, end] for trial, (steps, end) in
+            enumerate([(500, "max_steps"), (310, "terminated"), (500, "max_steps")])]
+    fig = pictures.task_learning_curve_figure(
+        rows, 500, "curve", {"max_steps": "reached the step cap (truncated)",
+                             "terminated": "terminated (success)"}, {0: -500.0, 1: -310.0,
+                                                                     2: -500.0}, -100.0)
+    try:
+        steps, returns = fig.axes
+        assert {t.get_text() for t in steps.get_legend().get_texts()} == {
+            "reached the step cap (truncated)", "terminated (success)", "step cap 500"}
+        assert returns.lines[0].get_ydata().tolist() == [-500.0, -310.0, -500.0]
+        assert "solved threshold -100" in returns.get_legend().get_texts()[0].get_text()
+    finally:
+        plt.close(fig)
+
+
+def test_weights_of_many_segments_stay_readable():
+    """Another task's network (3 actions x 128 segments x 16 inputs): colours without numbers,
+    at a bounded size, every 8th segment labelled; its history a panel per neuron (each input's
+    mean over the segments), not 384 panels."""
+    rng = np.random.default_rng(1)
+    final = 4.5 + rng.uniform(-0.01, 0.01, (3, 128, 16))
+    labels = [f"in{i}" for i in range(16)]
+    fig = pictures.weights_figure(final, labels, 8.0, "weights", final - 0.001, 0,
+                                  action_labels=("0", "1", "2"))
+    try:
+        width, height = fig.get_size_inches()
+        assert width < 20 and height < 16
+        panels = [ax for ax in fig.axes if ax.get_label() != "<colorbar>"]
+        assert len(panels) == 6 and not any(ax.texts for ax in panels)
+        assert panels[0].get_yticks().tolist() == list(range(0, 128, 8))
+        assert panels[0].get_title() == "neuron 0 (action 0)"
+    finally:
+        plt.close(fig)
+    history = np.stack([final - 0.001, final])
+    fig = pictures.weights_history_figure(np.arange(2), history, labels, "history",
+                                          action_labels=("0", "1", "2"))
+    try:
+        assert len(fig.axes) == 3 and all(len(ax.get_lines()) == 16 for ax in fig.axes)
+        assert "mean over 128 segments" in fig.axes[0].get_title()
     finally:
         plt.close(fig)
 

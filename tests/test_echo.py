@@ -14,8 +14,8 @@ import pytest
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Byte, Empty, UInt8MultiArray
 
-from clnn_ros.live.echo import to_csv, to_yaml
-from clnn_ros_msgs.msg import CartPoleState, InputLabels, Reward, SpikeVector, TrialEvent
+from clnn_ros.live.echo import EchoError, get_field, to_csv, to_yaml
+from clnn_ros_msgs.msg import Action, InputLabels, Observation, Reward, SpikeVector, TrialEvent
 
 from test_graph import wait_for_line
 
@@ -48,10 +48,10 @@ def test_a_message_without_fields_is_braces_in_yaml_and_an_empty_csv_line():
 
 
 def test_scalars_bytes_and_arrays_as_rosidl_runtime_py_writes_them():
-    state = CartPoleState(pole_angle_deg=-1.5e-7, failure=CartPoleState.FAILURE_POLE_ANGLE)
-    assert "\npole_angle_deg: -1.5e-07\npole_angular_velocity_deg_per_s: 0.0\nfailure: 1\n" \
-           in to_yaml(state)
-    assert to_csv(state).endswith(",0.0,-1.5e-07,0.0,1,0")
+    state = Observation(values=[0.0, 0.0, -1.5e-7, 0.0], terminated=True, termination=1)
+    assert "\nvalues:\n- 0.0\n- 0.0\n- -1.5e-07\n- 0.0\nreward: 0.0\nterminated: true\n" \
+           "truncated: false\ntermination: 1\n" in to_yaml(state)
+    assert to_csv(state).endswith(",0.0,0.0,-1.5e-07,0.0,0.0,True,False,1,0")
     reward = Reward(trial_over=True)
     assert "\ntrial_over: true\n" in to_yaml(reward) and to_csv(reward).endswith(",True")
     # a field alone (--field): no YAML end-of-document marker after a scalar
@@ -64,6 +64,24 @@ def test_scalars_bytes_and_arrays_as_rosidl_runtime_py_writes_them():
     assert to_yaml(imu.orientation_covariance, flow_style=True) == f"[0.5{', 0.0' * 8}]\n"
     assert to_csv(imu.orientation_covariance) == "0.5" + ",0.0" * 8
     assert to_csv(UInt8MultiArray(data=[1, 2])) == ",0,1,2"  # layout.dim is empty
+
+
+def test_a_field_by_name_and_an_element_by_its_index():
+    """--field values[2]: one of an observation's values (the cart-pole's pole angle); a name
+    or an index the message does not have is one error line (before any message comes only
+    the names can be checked: its sequences are empty)."""
+    state = Observation(values=[0.5, 0.0, -1.5e-7, 3.0])
+    assert to_yaml(get_field(state, "values[2]")) == "-1.5e-07\n"
+    assert to_csv(get_field(state, "values")) == "0.5,0.0,-1.5e-07,3.0"
+    assert get_field(Action(action=1), "action") == 1
+    assert get_field(Observation(), "values[7]", indexed=False) is not None  # names alone
+    for path, message in (("values[4]", "no element 4 in --field values[4]: 'values' has 4 "
+                                        "elements"),
+                          ("value", "no field 'value' in --field value (fields there: tick, "
+                                    "trial, values, reward,"),
+                          ("reward[0]", "'reward' in --field reward[0] is not a sequence")):
+        with pytest.raises(EchoError, match=re.escape(message)):
+            get_field(state, path)
 
 
 @pytest.mark.parametrize("options, error", [

@@ -1,8 +1,10 @@
 """The graph under fuzz (scripts/fuzz_graph.py): 1,000 malformed or well-formed but impossible
 messages (stale, far ahead, another graph's) on each of the seven input topics while an episode
-runs (5 processes, and composed). Every subscriber refuses every one of them, for the expected
-reason (its content, or its tick), no real message is refused (each node's refusal summary
-holds exactly the fuzz), and the episode equals the core's bit for bit."""
+runs (5 processes, and composed), and 1,000 task descriptions on env/task (malformed, or the
+run's own again). Every subscriber refuses every one of the seven topics' messages, for the
+expected reason (its content, or its tick), ignores the late descriptions, no real message is
+refused (each node's refusal summary holds exactly the fuzz), and the episode equals the core's
+bit for bit. Offline: every fuzz message is of its category as the nodes will receive it."""
 
 from __future__ import annotations
 
@@ -21,14 +23,15 @@ import pytest
 
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
+from clnn_ros.graph.names import TASK
 
 from test_graph import EPISODE_HANG_S
 
 from conftest import HANG_S, free_domain_id, problem_lines
 
-pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 DOMAIN_ID = free_domain_id()
-FUZZER = Path(__file__).parents[1] / "scripts" / "fuzz_graph.py"
+SCRIPTS = Path(__file__).parents[1] / "scripts"
+FUZZER = SCRIPTS / "fuzz_graph.py"
 # Each node's refusal summary (graph.lockstep.Refusals.summary), logged once at exit:
 # "[WARN] [<time>] [<node>]: refused N messages: <topic> (<kind>) <count>, ..."
 SUMMARY = re.compile(r"\[WARN\] \[[^]]*\] \[([\w.]+)\]: refused (\d+) messages: (.*)$")
@@ -60,6 +63,32 @@ def first_foreign(logged: str) -> str:
     return found[0]
 
 
+@pytest.mark.parametrize("nsv", [1, 2])
+def test_every_fuzz_message_is_of_its_category_as_received(monkeypatch, nsv):
+    """Offline (no DDS): each topic's plan of 2,000 messages made for live ticks, serialized and
+    deserialized as the nodes receive them: each is refused for its content, refused for its
+    tick (and fits the task, which the encoder checks too), or, on env/task, a description
+    that the run refuses or one of its own task; every category of every topic is made."""
+    import random
+    from rclpy.serialization import deserialize_message, serialize_message
+    monkeypatch.syspath_prepend(str(SCRIPTS))
+    from fuzz_messages import IGNORED, STALE_FROM, TYPES, MessageMaker, judged, schedule
+    p, rng = Params(nsv=nsv, max_steps=1500), random.Random(nsv)
+    maker, kinds = MessageMaker(p, rng), Counter()
+    for topic, plan in schedule(2000, rng).items():
+        for live, category in enumerate(plan, start=STALE_FROM):
+            sent = maker.make(topic, category, live)
+            received = deserialize_message(serialize_message(sent), TYPES[topic])
+            kind, _ = judged(topic, category, received, live, maker)
+            assert kind is not None, (topic, category, received)
+            kinds[topic, category, kind] += 1
+    assert {(topic, kind) for topic, _, kind in kinds} == \
+        {(topic, kind) for topic in TYPES if topic != TASK for kind in ("content", "tick")} | \
+        {(TASK, IGNORED)}
+    assert len(kinds) == sum(len(set(plan)) for plan in schedule(10, random.Random(0)).values())
+
+
+@pytest.mark.ros  # starts ROS / DDS
 @pytest.mark.parametrize("composed", [False, True], ids=["processes", "composed"])
 def test_every_fuzz_message_is_refused_and_the_episode_equals_the_core(tmp_path, composed):
     env = {**os.environ, "ROS_DOMAIN_ID": DOMAIN_ID, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
@@ -105,6 +134,10 @@ def test_every_fuzz_message_is_refused_and_the_episode_equals_the_core(tmp_path,
 
     for topic, sent in report["sent"].items():
         assert sum(sent.values()) == per_topic, topic
+        if topic == TASK:  # no tick: malformed descriptions and the run's own, all ignored
+            assert report["ignored"][TASK] == sent and len(sent) >= 4, sorted(sent)
+            assert not report["refusals_per_subscriber"][TASK]
+            continue
         assert WELL_FORMED <= set(sent) and len(set(sent) - WELL_FORMED) >= 2, sorted(sent)
     expected = Counter({(node, topic, kind): count
                         for topic, nodes in report["subscribers"].items() for node in nodes

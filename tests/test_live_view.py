@@ -17,6 +17,7 @@ from builtin_interfaces.msg import Time
 
 from clnn_ros.graph import names
 from clnn_ros.graph.run import RUN_SETTINGS
+from clnn_ros.core.params import STATE_NAMES
 from clnn_ros.nodes.markers import CART, CART_SIZE_M, FRAME, NAMESPACE, POLE, TRACK, CartPoleMarkers
 
 from conftest import HANG_S, free_domain_id, ros_environment
@@ -24,6 +25,8 @@ from conftest import HANG_S, free_domain_id, ros_environment
 ROOT = Path(__file__).resolve().parents[1]
 DOMAIN_ID = free_domain_id()
 POLE_HALF_LENGTH_M = 0.326  # the paper's, the run's default
+# The cart-pole's observation values (env/observation, in env/task's order): what the markers draw
+POSITION, ANGLE = STATE_NAMES.index("cart_position"), STATE_NAMES.index("pole_angle")
 
 
 def rotate(q, v):
@@ -101,6 +104,8 @@ def stamp_ns(header) -> int:
 def test_recorded_markers_show_each_recorded_state(ros_env, tmp_path):
     run_all(ros_env, tmp_path, "--option", "marker_period_ticks=1")  # every tick
     recorded = by_topic(tmp_path / "bag")
+    (task,) = recorded[names.TASK]  # latched, recorded once: the order of the values
+    assert tuple(task.variable_names) == STATE_NAMES and task.task == "cartpole"
     states = {s.tick: s for s in recorded[names.STATE]}
     arrays = recorded[names.MARKERS]
     assert len(arrays) == len(states) == len(recorded[names.CLOCK])  # one per tick
@@ -111,13 +116,12 @@ def test_recorded_markers_show_each_recorded_state(ros_env, tmp_path):
         assert (track.type, cart.type, pole.type) == (1, 1, 3)  # CUBE, CUBE, CYLINDER
         assert stamp_ns(track.header) == stamp_ns(cart.header) == stamp_ns(pole.header)
         state = states.pop(stamp_ns(cart.header) // 20_000_000)  # the state of its tick, once
-        assert cart.pose.position.x == state.cart_position_m
+        position, angle = state.values[POSITION], state.values[ANGLE]  # m, deg
+        assert cart.pose.position.x == position
         o = pole.pose.orientation  # a turn about y by the pole angle
         assert (o.x, o.z) == (0.0, 0.0)
-        assert math.degrees(2 * math.atan2(o.y, o.w)) == \
-            pytest.approx(state.pole_angle_deg, abs=1e-9)
-        assert pole_ends(pole)[0] == pytest.approx(
-            (state.cart_position_m, 0.0, CART_SIZE_M[2]), abs=1e-12)
+        assert math.degrees(2 * math.atan2(o.y, o.w)) == pytest.approx(angle, abs=1e-9)
+        assert pole_ends(pole)[0] == pytest.approx((position, 0.0, CART_SIZE_M[2]), abs=1e-12)
         assert pole.scale.z == 2 * POLE_HALF_LENGTH_M
     assert not states
 

@@ -24,16 +24,22 @@ from rclpy.serialization import deserialize_message, serialize_message
 
 from clnn_ros_msgs.msg import (
     Action,
-    CartPoleState,
     InputLabels,
+    Observation,
     Reward,
     SpikeVector,
+    TaskDescription,
     TrialEvent,
     WeightSnapshot,
 )
 
 from clnn_ros.graph import fields as message_fields
+from clnn_ros.core.params import Params
 from clnn_ros.core.physics import CONTINUE, FAIL_ANGLE, FAIL_POSITION
+from clnn_ros.core.task import cartpole_task
+from clnn_ros.graph.names import ENV_CONTRACT_VERSION
+from clnn_ros.graph.task_description import Described, described
+from clnn_ros.tasks.cartpole import TERMINATIONS
 
 pytestmark = pytest.mark.ros  # every test here starts ROS / DDS
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
@@ -73,12 +79,12 @@ def sample_messages() -> list:
     """One message of each type with every field set to a non-default value."""
     tick, trial = 12345678901, 7
     msgs = [
-        CartPoleState(tick=tick, trial=trial, cart_position_m=-0.25, cart_velocity_m_per_s=0.5,
-                      pole_angle_deg=-12.5, pole_angular_velocity_deg_per_s=3.75,
-                      failure=CartPoleState.FAILURE_POLE_ANGLE, successful_steps=9999),
+        Observation(tick=tick, trial=trial, values=[-0.25, 0.5, -12.5, 3.75], reward=-1.5,
+                    terminated=True, truncated=False, termination=1, successful_steps=9999),
+        TaskDescription(**{**cartpole_description().fields(),  # NaN would not compare equal
+                           "reward_threshold": 475.0}),
         SpikeVector(tick=tick, trial=trial, spikes=[0, 0, 1, 0, 0, 0, 0, 1, 0]),
-        Action(tick=tick, trial=trial, force_direction=Action.FORCE_NEGATIVE, force_n=-10.0,
-               winning_neuron=Action.NEURON_NEGATIVE_FORCE, winning_segment=5),
+        Action(tick=tick, trial=trial, action=1, winning_segment=5),
         Reward(tick=tick, trial=trial, reward_one_hot=[0, 1], success_counter=42),
         TrialEvent(tick=tick, trial=trial, event=TrialEvent.END, initial_angle_deg=-1.5,
                    successful_steps=10000, end_reason="cart_position", seed=4294967295),
@@ -86,6 +92,11 @@ def sample_messages() -> list:
                        weights=[0.001 * k for k in range(2 * 3 * 9)]),
     ]
     return msgs
+
+
+def cartpole_description() -> Described:
+    """The paper's cart-pole as its environment node describes it (limits as bounds)."""
+    return Described(cartpole_task(Params(max_steps=2000)), TERMINATIONS)
 
 
 def as_dict(msg) -> dict:
@@ -105,12 +116,11 @@ def test_definitions():
     """Field names and types, and the constants, are the documented ones."""
     common = {"tick": "uint64", "trial": "uint32"}  # no Header: the tick is the time
     expected = {
-        CartPoleState: {"cart_position_m": "double", "cart_velocity_m_per_s": "double",
-                        "pole_angle_deg": "double", "pole_angular_velocity_deg_per_s": "double",
-                        "failure": "uint8", "successful_steps": "uint32"},
+        Observation: {"values": "sequence<double>", "reward": "double", "terminated": "boolean",
+                      "truncated": "boolean", "termination": "uint8",
+                      "successful_steps": "uint32"},
         SpikeVector: {"spikes": "sequence<uint8>"},
-        Action: {"force_direction": "int8", "force_n": "double", "winning_neuron": "uint8",
-                 "winning_segment": "uint8"},
+        Action: {"action": "uint8", "winning_segment": "uint8"},
         Reward: {"reward_one_hot": "uint8[2]", "success_counter": "uint32",
                  "trial_over": "boolean"},
         TrialEvent: {"event": "uint8", "initial_angle_deg": "double", "successful_steps": "uint32",
@@ -122,24 +132,49 @@ def test_definitions():
         assert cls.get_fields_and_field_types() == {**common, **fields}, cls.__name__
     # once per run, not per tick: no tick or trial
     assert InputLabels.get_fields_and_field_types() == {"labels": "sequence<string>"}
+    assert TaskDescription.get_fields_and_field_types() == {
+        "contract_version": "uint16", "task": "string",
+        "variable_names": "sequence<string>", "variable_units": "sequence<string>",
+        "variable_low": "sequence<double>", "variable_high": "sequence<double>",
+        "action_labels": "sequence<string>", "action_values": "sequence<double>",
+        "max_steps": "uint32", "reward_threshold": "double", "ends_in": "string",
+        "termination_reasons": "sequence<string>"}
     assert (TrialEvent.START, TrialEvent.END, TrialEvent.EPISODE_END) == (0, 1, 2) == \
         (message_fields.START, message_fields.END, message_fields.EPISODE_END)
-    assert (Action.FORCE_NEGATIVE, Action.FORCE_POSITIVE) == (-1, 1)
-    assert (Action.NEURON_NEGATIVE_FORCE, Action.NEURON_POSITIVE_FORCE) == (0, 1)
-    # a state's failure code is the physics status, named as trials.csv names it
-    assert (CartPoleState.FAILURE_NONE, CartPoleState.FAILURE_POLE_ANGLE,
-            CartPoleState.FAILURE_CART_POSITION) == (CONTINUE, FAIL_ANGLE, FAIL_POSITION) == (
-        message_fields.FAILURE_NONE, message_fields.FAILURE_POLE_ANGLE,
-        message_fields.FAILURE_CART_POSITION) == (0, 1, 2)
-    assert CartPoleState().failure == CartPoleState.FAILURE_NONE
-    assert message_fields.FAILURE_REASONS == ("", "pole_angle", "cart_position")
+    # a trial's last tick: no action applies
+    assert Action.ACTION_NONE == message_fields.ACTION_NONE == 255
+    # the cart-pole's termination is the physics status: 1 + an index of its reasons, as
+    # trials.csv names them; CONTINUE (0) none
+    reasons = message_fields.CARTPOLE_TERMINATIONS
+    assert reasons == TERMINATIONS == ("pole_angle", "cart_position")
+    assert (CONTINUE, FAIL_ANGLE, FAIL_POSITION) == (0, 1 + reasons.index("pole_angle"),
+                                                     1 + reasons.index("cart_position"))
+    assert message_fields.END_REASONS == (message_fields.REACHED_MAX_STEPS, *reasons)
+    assert Observation().termination == CONTINUE and not Observation().terminated
     assert list(Reward().reward_one_hot) == [0, 0]
+
+
+def test_a_task_description_round_trips_to_the_task():
+    """The cart-pole's description, serialized and read back (graph.task_description), is the
+    task it was made of: names, units, bounds, actions, truncation, its reasons."""
+    made = cartpole_description()
+    msg = deserialize_message(serialize_message(TaskDescription(**made.fields())),
+                              TaskDescription)
+    assert msg.contract_version == ENV_CONTRACT_VERSION == 4
+    assert list(msg.variable_names) == ["cart_position", "cart_velocity", "pole_angle",
+                                        "pole_angular_velocity"]
+    assert list(msg.variable_units) == ["m", "m/s", "deg", "deg/s"]
+    assert list(msg.action_labels) == ["-F", "+F"]  # action 0 pushes with -F, 1 with +F
+    back = described(msg)
+    assert back == made
+    assert [back.end_reason(k) for k in (FAIL_ANGLE, FAIL_POSITION)] == list(TERMINATIONS)
 
 
 def test_type_description_files_installed():
     """The .msg and the type-hash .json that MCAP/rosbag2 writers need are installed in the venv."""
     share = Path(sys.prefix) / "share" / "clnn_ros_msgs" / "msg"
-    for cls in (CartPoleState, SpikeVector, Action, Reward, TrialEvent, WeightSnapshot):
+    for cls in (Observation, TaskDescription, SpikeVector, Action, Reward, TrialEvent,
+                WeightSnapshot):
         assert (share / f"{cls.__name__}.msg").is_file()
         assert (share / f"{cls.__name__}.json").is_file()
 

@@ -103,6 +103,13 @@ def test_analysis_equals_the_live_run(recorded):
     summary = (analysis / "summary.md").read_text()
     assert "trials completed: 12; mean successful steps 396.3" in summary
     assert "EPISODE_END, `completed`" in summary
+    # contract version 4: the task as env/task describes it, the observations by their type
+    assert "* task: `cartpole` (the environment's env/task): 4 variables `cart_position` m " \
+           "[-2.4, 2.4], `cart_velocity` m/s, `pole_angle` deg [-12, 12]" in summary
+    assert "| `/env/task` | `clnn_ros_msgs/msg/TaskDescription` | 1 | - | - |" in summary
+    assert "| `/env/observation` | `clnn_ros_msgs/msg/Observation` | 4,779 | 0-4778 | 0 |" in \
+        summary
+    assert "cartpole/state" not in summary
 
 
 @pytest.mark.ros
@@ -124,7 +131,7 @@ def test_bag_layout_is_rosbag2(recorded):
         assert channel.metadata["topic_type_hash"] == bag.type_hash(type_name)
         assert channel.metadata["topic_type_hash"].startswith("RIHS01_")
         qos = yaml.safe_load(channel.metadata["offered_qos_profiles"])
-        latched = topic == names.INPUT_LABELS  # published once: kept for late subscribers
+        latched = topic in names.LATCHED  # published once: kept for late subscribers
         assert qos[0]["reliability"] == "reliable" and \
             qos[0]["durability"] == ("transient_local" if latched else "volatile")
         assert qos[0]["history"] == "unknown"  # DDS does not tell a publisher's history
@@ -209,7 +216,10 @@ def test_rosbags_reads_and_converts_a_run(ros_env, tmp_path):
 
 
 def plain(value):
-    """A decoded field as plain Python, whichever reader decoded it."""
+    """A decoded field as plain Python, whichever reader decoded it (NaN as "nan", which
+    compares equal: the cart-pole's description has no reward threshold)."""
+    if isinstance(value, (float, np.floating)) and math.isnan(value):
+        return "nan"
     if isinstance(value, (bytes, bytearray, array.array)):
         return list(value)
     if isinstance(value, np.ndarray):
@@ -255,7 +265,7 @@ def test_two_independent_readers_decode_every_field(recorded):
     by_mcap = {}
     for m in read_ros2_messages(path):
         key = (names.graph_topic(m.channel.topic), m.sequence_count)
-        if key[1] % 97 == 3 or key[0] in (names.TRIAL_EVENT, names.WEIGHTS, names.INPUT_LABELS):
+        if key[1] % 97 == 3 or key[0] in (names.TRIAL_EVENT, names.WEIGHTS, *names.LATCHED):
             by_mcap[key] = fields_of(m.ros_msg)
     by_rosbags = {}
     seen = {}
@@ -334,9 +344,18 @@ def test_echo_topics_then_ctrl_c_leaves_a_complete_bag(ros_env, tmp_path):
     state = tool(ros_env, "clnn_ros.live.echo", names.absolute(STATE), "--once")
     assert state.returncode == 0 and state.stdout.endswith("\n---\n")
     fields = yaml.safe_load(state.stdout.split("---")[0])
-    assert list(fields) == ["tick", "trial", "cart_position_m", "cart_velocity_m_per_s",
-                            "pole_angle_deg", "pole_angular_velocity_deg_per_s", "failure",
-                            "successful_steps"]
+    assert list(fields) == ["tick", "trial", "values", "reward", "terminated", "truncated",
+                            "termination", "successful_steps"]
+    assert len(fields["values"]) == 4
+    # latched, long sent: the task, whose variables name the values
+    task = tool(ros_env, "clnn_ros.live.echo", names.absolute(names.TASK), "--once")
+    described = yaml.safe_load(task.stdout.split("---")[0])
+    assert described["variable_names"] == ["cart_position", "cart_velocity", "pole_angle",
+                                           "pole_angular_velocity"], task.stdout
+    assert described["contract_version"] == 4 and described["action_labels"] == ["-F", "+F"]
+    angle = tool(ros_env, "clnn_ros.live.echo", names.absolute(STATE), "--once", "--field",
+                 "values[2]")  # the pole angle, deg
+    assert abs(yaml.safe_load(angle.stdout.split("---")[0])) < 20, angle.stdout  # 12: a limit
     spikes = tool(ros_env, "clnn_ros.live.echo", "/rln/spikes", "--once")
     assert "\nspikes:\n- " in spikes.stdout and "label" not in spikes.stdout
     # latched: long sent
@@ -375,8 +394,8 @@ def test_echo_topics_then_ctrl_c_leaves_a_complete_bag(ros_env, tmp_path):
 
 
 def chunk_state_counts(path: Path) -> list[int]:
-    """The /cartpole/state messages (one per tick) of each complete chunk of an MCAP file that may
-    end in an unfinished one, in file order."""
+    """The state messages (env/observation, one per tick) of each complete chunk of an MCAP file
+    that may end in an unfinished one, in file order."""
     from mcap.exceptions import McapError
     from mcap.records import Channel, Chunk, Message
     from mcap.stream_reader import StreamReader, breakup_chunk
@@ -575,6 +594,55 @@ def test_sample_bag_analysis(tmp_path):
         (tmp_path / "trials.csv").read_text()
 
 
+# The sample's messages table: a bag of contract version 3 (cartpole/state, no env/task)
+SAMPLE_MESSAGES = """\
+| topic | type | messages | ticks | missing ticks |
+|---|---|---:|---|---:|
+| `/clock` | `rosgraph_msgs/msg/Clock` | 4,779 | 0-4778 | 0 |
+| `/trial/event` | `clnn_ros_msgs/msg/TrialEvent` | 25 | - | - |
+| `/cartpole/state` | `clnn_ros_msgs/msg/CartPoleState` | 4,779 | 0-4778 | 0 |
+| `/cartpole/markers` | `visualization_msgs/msg/MarkerArray` | 956 | - | - |
+| `/rln/spikes` | `clnn_ros_msgs/msg/SpikeVector` | 4,779 | 0-4778 | 0 |
+| `/rln/reward` | `clnn_ros_msgs/msg/Reward` | 4,779 | 0-4778 | 0 |
+| `/rln/action` | `clnn_ros_msgs/msg/Action` | 4,779 | 0-4778 | 0 |
+| `/rln/weights` | `clnn_ros_msgs/msg/WeightSnapshot` | 12 | - | - |
+| `/rln/input_labels` | `clnn_ros_msgs/msg/InputLabels` | 1 | - | - |
+"""
+
+
+def test_a_bag_of_contract_version_3_is_analyzed_as_before(tmp_path):
+    """The sample, recorded before contract version 4 (CartPoleStates on cartpole/state, Actions
+    by force direction, no env/task): its task is the paper's cart-pole, its summary as it was
+    (the messages of its own version, no task line), its trial's series the cart-pole's."""
+    from clnn_ros.analysis.data import is_cartpole, read_bag, trial_returns, trial_series
+    sample = REPO / "bags" / SAMPLE
+    if not sample.exists():
+        pytest.skip("no sample bag")
+    result = analyze(sample, "--out", tmp_path, "--trial", "11")
+    assert result.returncode == 0, result.stderr
+    summary = (tmp_path / "summary.md").read_text()
+    assert SAMPLE_MESSAGES in summary and "env/" not in summary and "* task:" not in summary
+    assert "| trial | initial angle (deg) | steps | end |\n|---:|---:|---:|---|\n" \
+           "| 0 | 1.20968 | 32 | cart_position |" in summary
+    assert "* trial ends: cart_position 11, max_steps 1" in summary
+    assert "Ticks 4010-4778 (769 states in the bag), 767 successful steps, ended by " \
+           "cart_position." in summary
+    data = read_bag(sample, salvage=False)
+    assert is_cartpole(data) and data["state_type"] == "clnn_ros_msgs/msg/CartPoleState"
+    assert data["task"].termination_reasons == ("pole_angle", "cart_position")
+    assert trial_returns(data) == {}  # its states carry no reward
+    series = trial_series(data, 11)
+    assert series.cartpole and [v.name for v in series.variables] == [
+        "cart_position", "cart_velocity", "pole_angle", "pole_angular_velocity"]
+    assert [(v.low, v.high) for v in series.variables[::2]] == [(-2.4, 2.4), (-12.0, 12.0)]
+    assert set(series.actions[:-1]) == {-1, 1} and series.actions[-1] == 0  # force directions
+    assert abs(series.states[-1, 0]) > 2.4 and series.end_reason == "cart_position"
+    # its state channel by its relative name in any namespace, as the graph's topics
+    assert [bag.relative_topic(name) for name in ("/cartpole/state", "/robot1/cartpole/state",
+                                                  "/robot1/env/observation", "/other/topic")] \
+        == ["cartpole/state", "cartpole/state", "env/observation", "/other/topic"]
+
+
 def test_a_bag_of_before_the_lean_messages_is_analyzed(tmp_path):
     """The first two chunks of the sample bag as recorded on 2026-12-03, whose messages began
     with a std_msgs/Header (and named a failure in failure_reason): analyze reads their ticks
@@ -590,6 +658,72 @@ def test_a_bag_of_before_the_lean_messages_is_analyzed(tmp_path):
     assert "| `/cartpole/state` | `clnn_ros_msgs/msg/CartPoleState` | 566 | 0-565 | 0 |" in summary
     assert "* environment: not recorded in this bag" in summary  # recorded before it was kept
     assert "* physics: parameter physics=paper, integrator=semi_implicit" in summary
+
+
+@pytest.mark.ros
+def test_a_gymnasium_tasks_bag_holds_its_task_and_is_analyzed_by_its_names(ros_env, tmp_path):
+    """Acrobot-v1 through the graph (3 trials of at most 100 steps): the bag holds its latched
+    env/task and every tick's Observation; the analysis names its variables, units and actions
+    as the description does, gives each trial's return (Acrobot: -1 a step but the goal's: the
+    successful steps' negative), draws no cart-pole (its --animate is refused)."""
+    from mcap_ros2.reader import read_ros2_messages
+    from clnn_ros.analysis import figures as pictures
+    from clnn_ros.analysis.data import is_cartpole, read_bag, trial_returns, trial_series
+    run = subprocess.run([sys.executable, "-m", "clnn_ros.run_all", "--quiet", "--env",
+                          "gymnasium:Acrobot-v1", "--seed", "3", "--trials", "3", "--max-steps",
+                          "100", "--out", str(tmp_path)], env={**ros_env,
+                         "CLNN_TEST_RUN": str(tmp_path)}, capture_output=True, text=True,
+                         timeout=HANG_S)
+    assert run.returncode == 0, run.stderr
+    path = tmp_path / "bag"
+    (task,) = [m.ros_msg for m in read_ros2_messages(path / "bag_0.mcap",
+                                                     topics=[names.absolute(names.TASK)])]
+    variables = ["cos_theta1", "sin_theta1", "cos_theta2", "sin_theta2", "theta1_dot",
+                 "theta2_dot"]
+    assert (task.contract_version, task.task, list(task.variable_names)) == \
+        (4, "gymnasium:Acrobot-v1", variables)
+    assert list(task.action_labels) == ["0", "1", "2"] and task.ends_in == "success"
+    with open(tmp_path / "trials.csv") as f:
+        steps = [int(r["steps"]) for r in csv.DictReader(f)]
+    ticks = json.loads((tmp_path / "summary.json").read_text())["ticks"]
+    messages = raw_messages(path)
+    assert sorted(m[2] for m in messages if m[1] == STATE) == list(range(ticks))
+    assert not [m for m in messages if m[1] == names.MARKERS]  # the cart-pole's own drawing
+
+    result = analyze(path, "--out", tmp_path / "analysis")
+    assert result.returncode == 0, result.stderr
+    assert (tmp_path / "analysis" / "trials.csv").read_text() == \
+        (tmp_path / "trials.csv").read_text()
+    summary = (tmp_path / "analysis" / "summary.md").read_text()
+    assert "* task: `gymnasium:Acrobot-v1` (the environment's env/task): 6 variables " \
+           "`cos_theta1` [-1, 1]," in summary and "`theta1_dot` rad/s [-12.5664, 12.5664]" in \
+        summary
+    assert "* environment: Gymnasium's Acrobot-v1 (`run_all --env gymnasium:Acrobot-v1`" in \
+        summary
+    assert "| trial | steps | end | return |" in summary and "markers" not in summary
+    for trial, count in enumerate(steps):
+        assert f"| {trial} | {count:,} | " in summary and f" | {-count:g} |" in summary
+    assert f"`traces.png`: trial {int(np.argmax(steps))} against the tick: " \
+           f"{', '.join(variables)}, the action" in summary
+    data = read_bag(path, salvage=False)
+    assert not is_cartpole(data) and trial_returns(data) == {
+        trial: -float(count) for trial, count in enumerate(steps)}
+    series = trial_series(data, 0)
+    assert [v.name for v in series.variables] == variables
+    assert series.action_labels == ("0", "1", "2") and not series.cartpole
+    assert set(series.actions[:-1]) <= {0, 1, 2} and np.isnan(series.actions[-1])
+    fig = pictures.traces_figure(series, "traces")
+    try:
+        labels = [ax.get_ylabel() for ax in fig.axes]
+        assert labels[:6] == ["cos theta1", "sin theta1", "cos theta2", "sin theta2",
+                              "theta1 dot (rad/s)", "theta2 dot (rad/s)"]
+        assert [t.get_text() for t in fig.axes[6].get_yticklabels()] == ["0", "1", "2"]
+    finally:
+        pictures.plt.close(fig)
+    refused = analyze(path, "--out", tmp_path / "gif", "--animate", "0")
+    assert refused.returncode == 2 and "--animate draws the cart-pole" in refused.stderr
+    assert not (tmp_path / "gif").exists()
+    assert not processes_with(str(tmp_path))
 
 
 @pytest.mark.ros

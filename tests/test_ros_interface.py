@@ -147,7 +147,8 @@ def test_two_graphs_in_two_namespaces_on_one_domain(ros_env, tmp_path):
             stderr=subprocess.PIPE, text=True))
     for _, _, process in runs.values():
         wait_for_line(process.stdout, "trial    2/", errors=process.stderr)
-    wanted = {"/a/cartpole/state", "/b/cartpole/state", "/a/clock", "/b/rln/action"}
+    wanted = {"/a/env/observation", "/b/env/observation", "/a/env/task", "/a/clock",
+              "/b/rln/action"}
     topics, deadline = set(), time.monotonic() + 90
     while not wanted <= topics and time.monotonic() < deadline:
         listed = subprocess.run([sys.executable, "-m", "clnn_ros.live.topics"], env=ros_env,
@@ -161,7 +162,7 @@ def test_two_graphs_in_two_namespaces_on_one_domain(ros_env, tmp_path):
         assert len(steps) >= 2
         assert steps == run_episode(seed, Params(trials=len(steps), max_steps=1500)).steps.tolist()
     assert wanted <= topics, sorted(topics)
-    assert "/cartpole/state" not in topics
+    assert not {"/env/observation", "/env/task", "/cartpole/state"} & topics
     assert not processes_with(str(tmp_path))
 
 

@@ -5,9 +5,11 @@
 BAG: a bag directory (as run_all records it: DIR/metadata.yaml, DIR/DIR_0.mcap) or its .mcap file.
 Writes into DIR (default: <bag>_analysis, beside the bag directory or the .mcap file):
     trials.csv           seed,trial,initial_angle_deg,steps,end_reason (as run_all writes it)
-    learning_curve.png   successful steps per trial, coloured by how each trial ended
-    traces.png           the chosen trial against the tick: cart position and velocity, pole
-                         angle and angular velocity, action, reward and punishment
+    learning_curve.png   successful steps per trial, coloured by how each trial ended (a task
+                         other than the cart-pole: and each trial's return)
+    traces.png           the chosen trial against the tick: each of the task's variables (the
+                         cart-pole: cart position and velocity, pole angle and angular
+                         velocity), action, reward and punishment
     raster.png           the chosen trial's spikes: an overview of the whole trial and its first
                          and last 200 ticks tick by tick, with the action, reward and punishment
     weights.csv          every /rln/weights snapshot (one per trial end): trial,tick,neuron,segment,input,weight
@@ -16,17 +18,20 @@ Writes into DIR (default: <bag>_analysis, beside the bag directory or the .mcap 
                          each weight's change since the first snapshot
     weights_history.png  every weight (neuron, segment, input) over the run, from every snapshot
     trial_N.gif          with --animate N: trial N's cart and pole, with each tick's spikes and
-                         action (at most 300 frames)
-    summary.md           what the bag holds and what the run did (environment, physics,
-                         encoding), and what each picture shows
+                         action (at most 300 frames; the cart-pole's alone)
+    summary.md           what the bag holds and what the run did (task, environment,
+                         physics, encoding), the trials (another task's: and their returns),
+                         and what each picture shows
 The chosen trial (--trial, default the longest) is read from the messages' ticks, decoded
 with the schemas embedded in the bag; segments are numbered from 0 and inputs labelled as the
-messages do. Exit status: 0 done, 1 the bag cannot be read (missing, not MCAP, truncated:
---salvage reads the complete chunks of a file whose recorder was killed, `python -m
-clnn_ros.bag repair` makes a finished copy) or the results cannot be written, 2 a refused
-argument (a trial not in the bag, an --out that cannot be a directory). The results are written
-together: a refused or failed analysis leaves no file behind. What is read of the bag:
-analysis_data; summary.md: analysis_summary; the pictures: analysis_figures.
+messages do; variables, units and actions as the bag's task (env/task) names them. A bag
+recorded before contract version 4 (cartpole/state, Actions by force direction) is read too.
+Exit status: 0 done, 1 the bag cannot be read (missing, not MCAP, truncated: --salvage reads
+the complete chunks of a file whose recorder was killed, `python -m clnn_ros.bag repair` makes
+a finished copy) or the results cannot be written, 2 a refused argument (a trial not in the
+bag, an --out that cannot be a directory, --animate of a task other than the cart-pole). The
+results are written together: a refused or failed analysis leaves no file behind. What is read
+of the bag: analysis.data; summary.md: analysis.summary; the pictures: analysis.figures.
 """
 
 from __future__ import annotations
@@ -41,12 +46,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .data import input_labels, read_bag, trial_rows, trial_series
+from .data import (input_labels, is_cartpole, read_bag, trial_returns, trial_rows,
+                   trial_series)
 from .summary import summary_markdown
 from ..bag import METADATA_FILE, BagError
 from ..cli import OneLineArgumentParser
 from ..files import cannot_create, describe_write_error
-from ..graph.fields import EPISODE_END, START, trials_csv
+from ..graph.fields import EPISODE_END, REACHED_MAX_STEPS, START, trials_csv
+from ..graph.task_description import TERMINATED
 from ..graph.names import SPIKES
 
 
@@ -102,12 +109,16 @@ def analyze(bag_path: Path, out: Path, trial: int | None, salvage: bool,
     for option, number in (("--trial", trial), ("--animate", animate)):
         if number is not None:
             check_trial(events, number, option)
+    if animate is not None and not is_cartpole(data):
+        raise UsageError(f"--animate draws the cart-pole; the bag's task is "
+                         f"{data['task'].task.name} (traces.png shows its variables)")
     if trial is None and rows:
         trial = max(rows, key=lambda r: (r[3], -r[1]))[1]
     episode_end = next((e for e in events if e.event == EPISODE_END), None)
     seed = rows[0][0] if rows else (events[0].seed if events else data["given"].get("seed"))
     result = dict(data=data, rows=rows, chosen=None, final=None, episode_end=episode_end,
-                  seed=seed, produced=[], animated=animate)
+                  seed=seed, produced=[], animated=animate,
+                  returns={} if is_cartpole(data) else trial_returns(data))
     try:
         with staged_output(out) as folder:
             write_results(result, trial, animate, folder, progress)
@@ -126,10 +137,15 @@ def write_results(result: dict, trial: int | None, animate: int | None, folder: 
     (folder / "trials.csv").write_text(trials_csv(rows))
     produced.append("trials.csv")
     if rows:
-        pictures.save(pictures.learning_curve_figure(
-            rows, params.max_steps,
-            f"Learning curve from the bag: seed {result['seed']}, {len(rows)} trials"),
-            folder / "learning_curve.png")
+        title = f"Learning curve from the bag: seed {result['seed']}, {len(rows)} trials"
+        if is_cartpole(data):
+            figure = pictures.learning_curve_figure(rows, params.max_steps, title)
+        else:
+            task = data["task"].task
+            figure = pictures.task_learning_curve_figure(
+                rows, params.max_steps, f"{task.name}: {title[0].lower()}{title[1:]}",
+                end_labels(data["task"]), result["returns"], task.reward_threshold)
+        pictures.save(figure, folder / "learning_curve.png")
         produced.append("learning_curve.png")
     series = trial_series(data, trial) if trial is not None else None
     if series is not None:
@@ -138,9 +154,8 @@ def write_results(result: dict, trial: int | None, animate: int | None, folder: 
                             "ticks": len(series.ticks), "steps": series.steps,
                             "end_reason": series.end_reason}
         pictures.save(pictures.traces_figure(
-            series, params.angle_limit_deg, params.track_limit_m,
-            f"Trial {trial} from the bag: ticks {start}-{end} ({series.steps:,} successful "
-            f"steps, {series.end_reason})"), folder / "traces.png")
+            series, f"Trial {trial} from the bag: ticks {start}-{end} ({series.steps:,} "
+                    f"successful steps, {series.end_reason})"), folder / "traces.png")
         produced.append("traces.png")
         if data["raw"][SPIKES]:
             pictures.save(pictures.raster_figure(
@@ -159,6 +174,14 @@ def write_results(result: dict, trial: int | None, animate: int | None, folder: 
         produced.append(name)
 
 
+def end_labels(described) -> dict[str, str]:
+    """A task's ways to end a trial, in the learning curve's order, with their legends."""
+    ending = "failed" if described.task.ends_in == "failure" else "reached"
+    return {REACHED_MAX_STEPS: "reached the step cap (truncated)",
+            **{r: f"{ending}: {r.replace('_', ' ')}" for r in described.termination_reasons},
+            TERMINATED: f"terminated ({described.task.ends_in})"}
+
+
 def write_weights(result: dict, folder: Path, pictures) -> None:
     """weights.csv, final_weights.npy, weights.png and weights_history.png from the snapshots."""
     data = result["data"]
@@ -175,15 +198,18 @@ def write_weights(result: dict, folder: Path, pictures) -> None:
     np.save(folder / "final_weights.npy", final)
     labels = input_labels(data, final.shape[2])
     last = snapshots[-1]
+    actions = None if is_cartpole(data) else data["task"].task.action_labels
+    if actions is not None and len(actions) != final.shape[0]:  # not the task's network
+        actions = tuple(str(k) for k in range(final.shape[0]))
     pictures.save(pictures.weights_figure(
         final, labels, data["params"].w_max,
         f"Weights after trial {last.trial} (tick {last.tick}), from the bag",
-        *((history[0], snapshots[0].trial) if len(snapshots) > 1 else ())),
-        folder / "weights.png")
+        *((history[0], snapshots[0].trial) if len(snapshots) > 1 else (None, None)),
+        action_labels=actions), folder / "weights.png")
     pictures.save(pictures.weights_history_figure(
         np.array([s.trial for s in snapshots]), history, labels,
-        f"Weights over the run: {len(snapshots)} snapshots, one after each trial"),
-        folder / "weights_history.png")
+        f"Weights over the run: {len(snapshots)} snapshots, one after each trial",
+        action_labels=actions), folder / "weights_history.png")
     result["produced"] += ["weights.csv", "final_weights.npy", "weights.png",
                            "weights_history.png"]
 

@@ -32,11 +32,12 @@ rclpy. The names below are those the recorder, run_all, echo and analyze use.
 
 from .directory import METADATA_FILE, foreign_files, remove_bag
 from .reader import (BagError, Decoder, begins_with_a_stamp, iter_raw, mcap_file, metadata,
-                     open_bag, tick_of)
+                     open_bag, relative_topic, tick_of)
 from .schemas import message_class, schema_text, type_hash
 from .writer import CHUNK_SECONDS, BagWriter, metadata_notes, note_in_metadata, qos_dicts
 
 __all__ = ["METADATA_FILE", "foreign_files", "remove_bag", "BagError", "Decoder",
-           "begins_with_a_stamp", "iter_raw", "mcap_file", "metadata", "open_bag", "tick_of",
+           "begins_with_a_stamp", "iter_raw", "mcap_file", "metadata", "open_bag",
+           "relative_topic", "tick_of",
            "message_class", "schema_text", "type_hash", "CHUNK_SECONDS", "BagWriter",
            "metadata_notes", "note_in_metadata", "qos_dicts"]

@@ -9,7 +9,7 @@ from pathlib import Path
 import yaml
 
 from ..graph.fields import stamp_nanoseconds
-from ..graph.names import graph_topic
+from ..graph.names import OLDER_STATE, graph_topic
 from .directory import METADATA_FILE
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -17,6 +17,16 @@ MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 class BagError(Exception):
     """A bag that cannot be read (missing, not MCAP, truncated, not one of ours): one line."""
+
+
+def relative_topic(resolved: str) -> str:
+    """The graph's relative name of a recorded channel's topic in any namespace (names.graph_topic);
+    the state channel of a bag recorded before contract version 4 ("/robot1/cartpole/state") by
+    its relative name too (names.OLDER_STATE), so that old bags read like new ones."""
+    name = graph_topic(resolved)
+    if name == resolved and resolved.endswith("/" + OLDER_STATE):
+        return OLDER_STATE
+    return name
 
 
 def tick_of(cdr: bytes, tau_ns: int, stamped: bool = False) -> int:
@@ -110,14 +120,15 @@ def open_bag(path, salvage: bool = False):
 def iter_raw(reader, topics=None):
     """(schema, topic, log_time, cdr bytes, recorded topic name)
     of the bag's messages in file order, the graph's topics by their relative names (a run in a
-    namespace reads as any other: "/robot1/clock" is "clock"); a salvaged (truncated) file ends
-    quietly at its last complete record."""
+    namespace reads as any other: "/robot1/clock" is "clock"; an old bag's state is
+    "cartpole/state": relative_topic); a salvaged (truncated) file ends quietly at its last
+    complete record."""
     from mcap.exceptions import McapError
     from mcap.reader import NonSeekingReader
     try:
         for schema, channel, message in reader.iter_messages(topics=topics,
                                                              log_time_order=False):
-            yield (schema, graph_topic(channel.topic), message.log_time, message.data,
+            yield (schema, relative_topic(channel.topic), message.log_time, message.data,
                    channel.topic)
     except (McapError, EOFError, struct.error, ValueError) as error:
         if not isinstance(reader, NonSeekingReader):

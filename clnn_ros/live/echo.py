@@ -2,8 +2,11 @@
 only). Run it against a graph started in another terminal (same ROS_DOMAIN_ID).
 
     python -m clnn_ros.live.echo /env/observation
-    python -m clnn_ros.live.echo /rln/action --once
-    python -m clnn_ros.live.echo /env/observation --field values
+    python -m clnn_ros.live.echo /env/task --once            # the task (latched): variable_names...
+    python -m clnn_ros.live.echo /rln/action --once          # action: the task's action index
+    python -m clnn_ros.live.echo /env/observation --field values     # in variable_names' order
+    python -m clnn_ros.live.echo /env/observation --field 'values[2]'  # one: the cart-pole's
+                                                                       # pole angle (deg)
     python -m clnn_ros.live.echo /rln/spikes --flow-style    # {tick: 12, trial: 0, spikes: [0, 1]}
     python -m clnn_ros.live.echo /env/observation --csv       # one line per message, for plotting
     python -m clnn_ros.live.echo /rln/spikes --raster        # one row per tick: tick 12 trial 0
@@ -13,13 +16,16 @@ As ros2topic's echo (rosidl_runtime_py's message_to_yaml and message_to_csv): YA
 style, fields in declaration order, `---` after each message, `{}` for a message without fields;
 --flow-style: collections inline; --csv: every field, nested ones flattened, comma-separated,
 no separator. The graph's topics are known in advance (echo may start before the graph); any
-other topic must be published within --wait seconds. Exit status: 0 after --once, 130 on
-Ctrl-C, 1 for an unknown topic or field, 2 for bad options.
+other topic must be published within --wait seconds. --field takes a field's name (nested:
+clock.sec) and an element of a sequence by its index (values[2]). Exit status: 0 after --once,
+130 on Ctrl-C, 1 for an unknown topic or field (or an index a message does not reach), 2 for
+bad options.
 """
 
 from __future__ import annotations
 
 import array
+import re
 import sys
 import time
 
@@ -72,13 +78,32 @@ def to_csv(value) -> str:
     return str(value)
 
 
-def get_field(msg, path: str):
+FIELD_PART = re.compile(r"(\w+)(?:\[(\d+)\])?")
+
+
+def get_field(msg, path: str, indexed: bool = True):
+    """The field `path` of `msg`: names separated by dots (clock.sec), a sequence's element by
+    its index (values[2]). EchoError (one line) for an unknown name, or, if `indexed`, an index
+    the message's sequence does not reach (without: the names alone are checked, as before any
+    message comes)."""
     value = msg
     for part in path.split("."):
-        if not _is_message(value) or part not in value.get_fields_and_field_types():
+        match = FIELD_PART.fullmatch(part)
+        name = match.group(1) if match else part
+        if not _is_message(value) or name not in value.get_fields_and_field_types():
             known = ", ".join(value.get_fields_and_field_types()) if _is_message(value) else "none"
-            raise EchoError(f"no field '{part}' in --field {path} (fields there: {known})")
-        value = getattr(value, part)
+            raise EchoError(f"no field '{name}' in --field {path} (fields there: {known})")
+        value = getattr(value, name)
+        if match and match.group(2) is not None:
+            if not hasattr(value, "__len__") or isinstance(value, str):
+                raise EchoError(f"'{name}' in --field {path} is not a sequence: no [index]")
+            if not indexed:  # an empty message's sequence: what follows is checked per message
+                return value
+            index = int(match.group(2))
+            if index >= len(value):
+                raise EchoError(f"no element {index} in --field {path}: '{name}' has "
+                                f"{len(value)} elements")
+            value = value[index]
     return value
 
 
@@ -136,7 +161,8 @@ def main(argv=None) -> int:
                                    description=__doc__.split("\n\n")[0])
     parser.add_argument("topic")
     parser.add_argument("--once", action="store_true", help="print one message and exit")
-    parser.add_argument("--field", help="print only this field, e.g. tick or values")
+    parser.add_argument("--field", help="print only this field, e.g. tick, values or "
+                                        "'values[2]' (an element by its index)")
     style = parser.add_mutually_exclusive_group()
     style.add_argument("--flow-style", action="store_true",
                        help="YAML with collections inline: {sec: 0, nanosec: 20000000}")
@@ -160,7 +186,7 @@ def main(argv=None) -> int:
                 raise EchoError(f"--raster needs a SpikeVector topic such as /rln/spikes, not "
                                 f"{args.topic} ({type_name})")
             if args.field:
-                get_field(cls(), args.field)  # check the path before any message comes
+                get_field(cls(), args.field, indexed=False)  # the names, before any message
             printed = []
             raster = Raster(sys.stdout) if args.raster else None
 

@@ -5,8 +5,9 @@
 
 It subscribes raw (the CDR bytes, never decoded) to clock, trial/event, env/observation,
 cartpole/markers, rln/spikes, rln/reward, rln/action and rln/weights (in its namespace) with a deep
-reader queue, and to the latched env/task and rln/input_labels, and announces "recorder" on _graph/ready once each subscription but the optional
-cartpole/markers' (names.OPTIONAL: an environment of one's own may not publish it) sees its
+reader queue, and to the latched env/task and rln/input_labels (names.LATCHED), and announces
+"recorder" on _graph/ready once each subscription but the optional cartpole/markers'
+(names.OPTIONAL: another task, or an environment of one's own, may not publish it) sees its
 publisher (again every second until the first clock); run_all makes the trial manager wait for it
 and every publisher of the graph wait for its subscription (run setting extra_nodes), so the first
 tick is recorded. Every 20 ms it publishes on _recorder/progress the last tick it holds on every
@@ -60,8 +61,8 @@ class RecorderNode(Node):
         params, settings = declare_run_parameters(
             self, RECORDER, run, own={"bag_path": ("", "the bag directory the recorder writes"),
                        "environment": ("", "what ran as the environment node, kept in the bag "
-                                       "(run_all sets it): cartpole, gymnasium, mujoco, external "
-                                       "or the --env-node command")})
+                                       "(run_all sets it): cartpole, gymnasium, mujoco, "
+                                       "gymnasium:ID, external or the --env-node command")})
         use_sim_time(self, RECORDER)  # log and receive times are wall-clock, as rosbag2's
         bag_path = settings.pop("bag_path")
         environment = settings.pop("environment")
