@@ -3,7 +3,8 @@
     python tests/broken_env_node.py BUG[,BUG...] --ros-args ...
 
 BUG: no_reset (successful_steps not reset at START), wrong_tick (the observation of tick 2 and
-later is published with the tick one too high), no_exit (ignores EPISODE_END), accept_bad_action
+later is published with the tick one too high), extra_value (from tick 2 on, one value more
+than its task has), no_exit (ignores EPISODE_END), accept_bad_action
 (applies action 2, which the cart-pole lacks, as action 1), silent (never announces readiness),
 mute (stops publishing observations at tick 50 but stays alive), crash (raises at start),
 default_cart_mass (steps the default cart_mass, not the run's), contract_v1 (stamps its first
@@ -54,6 +55,8 @@ class BrokenEnvironmentNode(EnvironmentNode):
                 msg.header.stamp = self.get_clock().now().to_msg()
             if "wrong_tick" in BUGS and msg.tick >= 2:
                 msg.tick += 1
+            if "extra_value" in BUGS and msg.tick >= 2:
+                msg.values.append(0.0)
             publish(msg)
         self.refusals.refuse, self.state_pub.publish = accept_bad_action, publish_wrong_tick
 

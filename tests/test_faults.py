@@ -153,6 +153,19 @@ def test_a_wrong_tick_is_blamed_on_its_sender(ros_env, tmp_path):
         "last refused env/observation: tick 3: expected tick 2)"], stderr[-3000:]
 
 
+def test_an_observation_that_does_not_fit_the_task_is_blamed_on_its_sender(ros_env, tmp_path):
+    """One value more than the task's variables: the encoder and the trial manager refuse it
+    (each reads the task), and the environment is named, not the encoder that then waits."""
+    process = start_run(ros_env, tmp_path, "--stall-timeout", "1",
+                        "--env-node", f"python {BROKEN} extra_value")
+    _, stderr = process.communicate(timeout=HANG_S)
+    assert process.returncode == 1
+    assert problem_lines(stderr) == [
+        "run_all: error: stall: node 'environment' went silent at tick 2 (no progress for 1 s; "
+        "last refused env/observation: tick 2: 5 values, the task cartpole has 4 variables "
+        "(cart_position, cart_velocity, pole_angle, pole_angular_velocity))"], stderr[-3000:]
+
+
 @pytest.mark.parametrize("command", ["python no_such_file_clnn.py", f"python {BROKEN} crash"],
                          ids=["missing", "raises"])
 def test_a_node_that_fails_at_start_ends_the_run_at_once(ros_env, tmp_path, command):

@@ -135,6 +135,8 @@ class TrialManagerNode(Node):
             if self.started_at is None:  # its nodes wait for its first clock: another graph's
                 self.stop(NOT_STARTED, another_graph(self.get_namespace(), f"its {topic} came "
                                                      f"before this graph's first tick"))
+            elif topic == STATE and (problem := self.task.observation_problem(msg.values)):
+                self.refusals.refuse(topic, msg, problem, kind="content")  # as the encoder does
             elif (self.join.offer(topic, msg) if topic in (STATE, ACTION) else
                   msg.tick == self.current[topic] + 1 <= self.join.tick):
                 self.current[topic] = msg.tick
