@@ -20,8 +20,6 @@ Exit status: 0 done, 1 the graph failed (stall, crashed node), 2 bad input, 130 
 from __future__ import annotations
 
 import argparse
-import contextlib
-import json
 import shlex
 import shutil
 import signal
@@ -37,18 +35,15 @@ from .core.checkpoint import Checkpoint, load_checkpoint
 from .core.params import CARTPOLE, PROTOCOLS, STATE_NAMES, ParamError, Params
 from .core.presets import PRESETS
 from .files import cannot_create
-from .graph.fields import COMPLETED
-from .graph.names import NOT_STARTED, PER_TICK, RECORDER, TRIAL_MANAGER, namespace_problem
+from .graph.names import NOT_STARTED, RECORDER, TRIAL_MANAGER, namespace_problem
 from .graph.run import (DEMO, ENVIRONMENTS, OWN_TAU, RUN_SETTINGS, SIMULATORS, default_bag_path,
                         run_values)
-from .graph.ticks import (RUN_END_NOTE, RUN_LAST_TICK_NOTE, TICKS_RECORD, TickRanges,
-                          describe_ranges)
 from .core.init_weights import OPTIMAL, episode_start
 from .session.process_signals import STOP_SIGNALS, catch_signals
 from .session.rosenv import domain_id_problem
-from .processes.supervise import (NODES, Supervisor, fresh_summary, report_failure,
-                                  run_separate, say, start_recorder, stop_recorder,
-                                  work_directory)
+from .processes.run_end import report_bag
+from .processes.supervise import (NODES, Supervisor, failure_of, fresh_summary, run_separate,
+                                  say, start_recorder, stop_recorder, work_directory)
 from .tasks import gymnasium_task
 from .tasks.gymnasium_task import PREFIX
 
@@ -162,6 +157,12 @@ def check_paths_and_commands(parser: argparse.ArgumentParser, args) -> None:
             parser.error("--env-node needs a command, e.g. \"python examples/noisy_cartpole.py\"")
         if args.composed:
             parser.error("--env-node runs its own process: not with --composed")
+        script = Path(command[1]) if command[0] in PYTHON_NAMES and len(command) > 1 else None
+        if Path(command[0]).is_dir():
+            parser.error(f"--env-node: {command[0]} is a directory, not a program")
+        if script is not None and script.is_dir() and not (script / "__main__.py").is_file():
+            parser.error(f"--env-node: {script} is a directory, not a Python file (e.g. "
+                         f"python {script / 'my_node.py'})")
         if command[0] not in PYTHON_NAMES and shutil.which(command[0]) is None:
             parser.error(f"--env-node: no program {command[0]!r} found")
         if args.env == "external":
@@ -284,97 +285,53 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
             print(f"run_all: waiting for an environment node in namespace {namespace} (at most "
                   f"{values.get('stall_timeout_s', RUN_SETTINGS['stall_timeout_s']):g} s once the "
                   f"rest is ready)", flush=True)
-        failed = recorder_forced = False
+        error, recorder_forced = None, False
         if args.composed:
             from .processes.composed import run_composed  # loads rclpy and the nodes
             status, reason = run_composed(values, environment is not None, namespace,
                                           interrupted)
         else:
-            status, failed = run_separate(supervisor, values, tmp, env_command,
-                                          namespace, interrupted, began, bag_path)
+            status, error = run_separate(supervisor, values, tmp, env_command,
+                                         namespace, interrupted, began, bag_path)
             reason = supervisor.children[TRIAL_MANAGER].own_error()
         if bag_path is not None:
             recorder = supervisor.children[RECORDER]
-            if not failed and not interrupted and recorder.returncode not in (None, 0):
-                report_failure(recorder, bag_path)  # it failed first: the graph then stopped
-                failed = True
-            episode_ended = status in (0, 1) and not failed
+            if error is None and not interrupted and recorder.returncode not in (None, 0):
+                error = failure_of(recorder, bag_path)  # it failed first: the graph then stopped
+            episode_ended = status in (0, 1) and error is None
             recorder_forced = stop_recorder(supervisor, episode_ended)
             # Told to stop while still starting (before its handler was set), it dies of the
             # SIGTERM: as told, nothing recorded.
             stopped_as_told = (0, 128 + signal.SIGINT) + \
                 (() if episode_ended else (-signal.SIGTERM,))
-            if not failed and not interrupted and not recorder_forced and \
+            if error is None and not interrupted and not recorder_forced and \
                     recorder.returncode not in stopped_as_told:
-                report_failure(recorder, bag_path)
-                failed = True
+                error = failure_of(recorder, bag_path)
         summary = fresh_summary(out, began)
-    if summary and not failed and status != NOT_STARTED:  # the error line says why not
+    if summary and error is None and status != NOT_STARTED:  # the error line says why not
         mean = summary["mean_steps"]
         print(f"run_all: {summary['exit_reason']}: {summary['trials']} trials, mean steps "
               f"{mean if mean is None else round(mean, 1)}, {summary['ticks']} ticks, "
               f"{summary['ticks_per_s'] or 0.0:.0f} ticks/s"
               + (f"; results in {args.out}" if args.out else ""))
-    if bag_path is not None and status == NOT_STARTED:
-        bag.remove_bag(bag_path)  # what it holds is another graph's
-    elif bag_path is not None:
-        with contextlib.suppress(OSError):
-            bag_path.rmdir()  # empty: created here to check it could be; nothing was recorded
-        finished = (bag_path / bag.METADATA_FILE).is_file()
-        if finished or not bag_path.exists():  # an unfinished one: the error line says so
-            print(f"run_all: bag {bag_path}" if finished else
-                  "run_all: nothing recorded, no bag", flush=True)
-        # The ticks the run completed: an episode ended early leaves its last tick unfinished
-        # (a stall's is missing by definition); Ctrl-C's last messages may be in flight.
-        done = summary.get("ticks", 0) - (summary.get("exit_reason") != COMPLETED)
-        if summary.get("exit_reason") is not None and finished:
-            note_run(bag_path, summary["exit_reason"], done)
-        if summary.get("exit_reason") not in (None, "interrupted") and finished and done > 0 \
-                and (lacking := bag_lacks(bag_path, done)):
-            say(f"run_all: warning: the bag lacks {lacking} (the run's ticks: 0-{done - 1}, "
-                f"as in trials.csv)")
-        if recorder_forced and bag_path.exists() and not finished:  # else its own lines said so
-            say(f"run_all: warning: the recorder had to be stopped before it finished the bag: "
-                f"python -m clnn_ros.bag repair {bag_path}")
-    if failed:
-        return 1
-    if status in (128 + signum for signum in STOP_SIGNALS):
+    lacking = "" if bag_path is None else report_bag(
+        bag_path, status, summary, recorder_forced,
+        supervisor.children[RECORDER].stopped_s if RECORDER in supervisor.children else 0.0)
+    # The verdict is the last line, what the bag lacks on it (issue 47)
+    if error is None and status in (128 + signum for signum in STOP_SIGNALS):
         say("run_all: interrupted")
         return status
-    if status == 0 and summary.get("exit_reason") == "interrupted":
-        status, reason = 1, "the trial manager was stopped by a signal from outside run_all"
-    elif status != 0:
-        reason = summary.get("exit_reason") or reason or \
+    if error is None and status == 0 and summary.get("exit_reason") == "interrupted":
+        error = "the trial manager was stopped by a signal from outside run_all"
+    elif error is None and status != 0:
+        error = summary.get("exit_reason") or reason or \
             f"the trial manager exited with status {status}"
-    if status != 0:
-        say(f"run_all: error: {reason}")
+    if error is not None:
+        say(f"run_all: error: {error}" + (f"; {lacking}" if lacking else ""))
         return 1
+    if lacking:
+        say(f"run_all: warning: {lacking}")
     return 0
-
-
-def note_run(bag_path: Path, exit_reason: str, done: int) -> None:
-    """Note in the bag how far the run went: the bag then says so even where the recorder missed
-    the episode's end (stopped, or behind when the graph stalled)."""
-    try:
-        bag.note_in_metadata(bag_path, {RUN_END_NOTE: exit_reason, RUN_LAST_TICK_NOTE: done - 1})
-    except (OSError, yaml.YAMLError, KeyError, TypeError) as error:
-        say(f"run_all: warning: could not note the run's end in {bag_path / bag.METADATA_FILE}: "
-            f"{error}")
-
-
-def bag_lacks(bag_path: Path, ticks: int) -> str:
-    """The ticks of a finished bag's per-tick topics that the run had and the bag lacks, as the
-    recorder noted them (graph.ticks), in one phrase; '' if it lacks none."""
-    try:
-        record = bag.metadata(bag_path, TICKS_RECORD) or {}
-    except bag.BagError as error:
-        return f"a readable record of its ticks ({error})"
-    lacking = []
-    for topic in PER_TICK:
-        gaps = TickRanges(json.loads(record.get(topic, "[]"))).missing(0, ticks - 1)
-        if gaps:
-            lacking.append(f"ticks {describe_ranges(gaps)} of {topic}")
-    return "; ".join(lacking)
 
 
 def announce(args, values: dict, checkpoint, namespace: str) -> None:

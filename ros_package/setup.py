@@ -39,6 +39,10 @@ import sys
 try:
     from {module} import {function}
 except ImportError as error:
+    if (error.name or "clnn_ros").partition(".")[0] != "clnn_ros":  # clnn_ros found, not its own
+        sys.exit(f"{name}: error: {module} needs the Python package {{error.name!r}}, which is "
+                 f"not installed: pip install the packages that the README lists under In a "
+                 f"ROS 2 workspace")
     sys.exit(f"{name}: error: cannot import {module} ({{error}}): source the workspace's "
              f"install/setup.bash, or activate the environment that has clnn_ros")
 sys.exit({function}())

@@ -87,6 +87,8 @@ RUN_ALL_CASES = [  # (arguments, what the one error line says)
     (["--env-node", "no_such_program_clnn"], "--env-node: no program 'no_such_program_clnn'"),
     (["--env-node", "python 'node.py"], "No closing quotation"),
     (["--env-node", "python node.py", "--composed"], "not with --composed"),
+    (["--env-node", "."], "--env-node: . is a directory, not a program"),
+    (["--env-node", "python ."], "--env-node: . is a directory, not a Python file"),
     # parameters YAML
     (["--params-file", "missing.yaml"], "cannot read params file missing.yaml"),
     (["--params-file", "malformed.yaml"], "params file malformed.yaml is not valid YAML"),

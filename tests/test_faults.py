@@ -83,6 +83,40 @@ def test_killed_process_is_named_at_once_and_the_graph_comes_down(ros_env, tmp_p
     assert not processes_with(str(tmp_path))
 
 
+@pytest.mark.parametrize("fault", ["agent", "trial_manager", "contract_v3"])
+def test_the_last_line_is_the_verdict_with_the_bag_before_it(ros_env, tmp_path, fault):
+    """A node killed (-9), the trial manager killed, an environment node refused: stdout and
+    stderr together, as a terminal or a script reading the last line sees them, end with the
+    error line, the bag's line before it (issue 47: the error stood above `run_all: bag`)."""
+    output = tmp_path / "output.txt"
+    extra = ["--env-node", f"python {BROKEN} contract_v3"] if fault == "contract_v3" else []
+    with open(output, "w") as both:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "clnn_ros.run_all", "--seed", "1", "--trials", "400",
+             "--out", str(tmp_path), "--stall-timeout", "30", *extra],
+            env={**ros_env, "CLNN_TEST_RUN": str(tmp_path)}, stdout=both, stderr=both,
+            start_new_session=True)
+    try:
+        if fault != "contract_v3":
+            deadline = time.monotonic() + HANG_S
+            while "trial    2/" not in output.read_text() and time.monotonic() < deadline:
+                time.sleep(0.1)
+            os.kill(child(process, f"clnn_ros.nodes.{fault}"), signal.SIGKILL)
+        process.wait(timeout=HANG_S)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+    lines = output.read_text().splitlines()
+    assert process.returncode == 1, lines[-20:]
+    verdict = {"agent": "node 'agent' died (SIGKILL)",
+               "trial_manager": "node 'trial_manager' died (SIGKILL)",
+               "contract_v3": "the environment node speaks contract version 3 or older"}[fault]
+    assert lines[-1].startswith(f"run_all: error: {verdict}"), lines[-20:]
+    assert lines[-2] in (f"run_all: bag {tmp_path / 'bag'}", "run_all: nothing recorded, no bag"), \
+        lines[-20:]
+    assert not processes_with(str(tmp_path))
+
+
 def test_a_node_stopped_by_someone_else_is_named(ros_env, tmp_path):
     """SIGTERM to one node (it ends with status 0, before the episode's end): the trial manager
     never ends, and with a stall timeout longer than the grace run_all names the node once the
@@ -164,6 +198,27 @@ def test_an_observation_that_does_not_fit_the_task_is_blamed_on_its_sender(ros_e
         "run_all: error: stall: node 'environment' went silent at tick 2 (no progress for 1 s; "
         "last refused env/observation: tick 2: 5 values, the task cartpole has 4 variables "
         "(cart_position, cart_velocity, pole_angle, pole_angular_velocity))"], stderr[-3000:]
+
+
+@pytest.mark.parametrize("trials", [3, 20])
+def test_a_renamed_environment_node_is_named_as_such_at_any_length(ros_env, tmp_path, trials):
+    """An environment node of one's own, renamed (-r __node:=brain), that announces itself as
+    the environment without checking its name (issue 47: 3 trials completed with exit 0, 20
+    ended as a foreign publisher): the graph does not start, and the line says why."""
+    node = Path(__file__).parents[1] / "examples" / "noisy_cartpole.py"
+    run = subprocess.run(
+        [sys.executable, "-m", "clnn_ros.run_all", "--trials", str(trials), "--out",
+         str(tmp_path), "--env-node", f"python {node} --ros-args -r __node:=brain"],
+        env={**ros_env, "CLNN_TEST_RUN": str(tmp_path)}, capture_output=True, text=True,
+        timeout=HANG_S)
+    assert run.returncode == 1, run.stderr[-3000:]
+    assert problem_lines(run.stderr) == [
+        "run_all: error: no node named 'environment' in namespace /: node 'brain' (namespace /) "
+        "publishes env/observation, env/task; the graph takes an environment node by its name "
+        "(renamed, -r __node:=brain, it is none: docs/ENV_CONTRACT.md)"], run.stderr[-3000:]
+    assert not (tmp_path / "trials.csv").exists() or \
+        len((tmp_path / "trials.csv").read_text().splitlines()) == 1
+    assert not processes_with(str(tmp_path))
 
 
 @pytest.mark.parametrize("command", ["python no_such_file_clnn.py", f"python {BROKEN} crash"],

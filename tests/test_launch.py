@@ -39,7 +39,7 @@ ROS2_LAUNCH = (
     "    package_name='clnn_ros', file_name='graph.launch.py'),\n"
     "    launch_file_arguments=sys.argv[1:]))\n")
 END_S = 45.0  # a bound against a hang: every launch here ends within seconds of its cause
-SUPERVISION = "Caught exception in launch"  # the supervision's one line (launch's wording)
+SUPERVISION = "[ERROR] [clnn_ros]: "  # the supervision's one line
 DOMAIN_ID = free_domain_id()
 
 
@@ -138,8 +138,10 @@ class Launched:
         return [line for line in self.lines if text in line]
 
     def supervision_lines(self) -> list[str]:
-        """The supervision's lines, without launch's prefix: "node 'agent' died (SIGKILL)"."""
-        return [line.split(": ", 2)[-1] for line in self.having(SUPERVISION)]
+        """The supervision's lines, without launch's prefix: "node 'agent' died (SIGKILL)";
+        launch's own error lines too (none is expected: "see debug for traceback" misled)."""
+        return [line.split(": ", 1)[-1] for line in self.having(SUPERVISION)] + \
+            self.having("[ERROR] [launch]")
 
 
 def test_the_episode_ends_the_launch_with_exit_0_and_its_results(launch_env, tmp_path):
@@ -154,6 +156,30 @@ def test_the_episode_ends_the_launch_with_exit_0_and_its_results(launch_env, tmp
     assert len(launched.having("process has finished cleanly")) == 6
 
 
+@pytest.mark.parametrize("argument, line", [
+    ("foo:=1", "graph.launch.py: error: unknown launch argument foo:=1; the arguments: seed, "),
+    ("trials:=-3", "graph.launch.py: error: trials must be"),
+])
+def test_a_bad_launch_argument_is_one_line_and_no_run(launch_env, tmp_path, argument, line):
+    """Before (issue 47): foo:=1 ran the whole 20-trial demo and wrote a bag into the current
+    directory without a word; a refused value said "see debug for traceback"."""
+    launched = Launched(launch_env, tmp_path, argument)
+    assert launched.end() == 1, launched.output()
+    lines = launched.supervision_lines()
+    assert len(lines) == 1 and lines[0].startswith(line), launched.output()
+    assert not launched.having("process started") and not launched.having("see debug")
+    assert not list(tmp_path.rglob("metadata.yaml"))
+
+
+def test_max_steps_caps_a_trial(launch_env, tmp_path):
+    out = tmp_path / "out"
+    launched = Launched(launch_env, tmp_path, "trials:=2", "max_steps:=20", "record:=false",
+                        f"out:={out}")  # seed 0's first trials last 32 and 34 steps uncapped
+    assert launched.end(120.0) == 0, launched.output()
+    rows = (out / "trials.csv").read_text().splitlines()[1:]
+    assert [row.split(",")[3:] for row in rows] == [["20", "max_steps"]] * 2, rows
+
+
 def test_a_node_killed_mid_run_ends_the_launch_at_once_naming_it(launch_env, tmp_path):
     """Before: the launch went on until the trial manager saw the stall, then ended with 0."""
     launched = Launched(launch_env, tmp_path, "trials:=400", "stall_timeout:=30",
@@ -165,6 +191,7 @@ def test_a_node_killed_mid_run_ends_the_launch_at_once_naming_it(launch_env, tmp
     assert launched.end() != 0, launched.output()
     assert time.monotonic() - killed_at < 25.0  # not after the 30 s stall
     assert launched.supervision_lines() == ["node 'agent' died (SIGKILL)"], launched.output()
+    assert not launched.having("see debug for traceback"), launched.output()
 
 
 def test_a_node_lost_before_the_first_tick_ends_the_launch_naming_it(launch_env, tmp_path):

@@ -24,7 +24,8 @@ from clnn_ros.core.physics import (CONTINUE, FAIL_ANGLE, FAIL_POSITION, CartPole
 from clnn_ros.core.presets import preset_values
 from clnn_ros.core.solving import solved_episode, solving_summary, steps_to_solve
 from clnn_ros.reproduce.__main__ import main as reproduce_main
-from clnn_ros.reproduce.common import load_stored
+from clnn_ros.reproduce.common import load_stored, store_arrays
+from clnn_ros.reproduce.versus import has_baselines_extra
 
 from conftest import free_domain_id, ros_environment
 
@@ -215,6 +216,24 @@ def test_versus_runs_the_agents_alike_and_resumes(tmp_path, capsys):
         "Anderson 1983): 2 of its 3 seeds." in report
     assert reproduce_main([*argv, "--seeds", "5", "--stored-only"]) == 2
     assert "no agent-seed of these stored" in capsys.readouterr().err
+
+
+@pytest.mark.skipif(has_baselines_extra(), reason="the case of a user without the extra")
+def test_versus_stored_only_reports_deep_agents_without_the_baselines_extra(tmp_path, capsys):
+    """The report of stored agent-seeds runs no deep agent: a user without torch regenerates it
+    from PPO's stored seeds (issue 47: refused, asking for the extra); running PPO still needs
+    the extra, said in one line."""
+    returns = np.full(120, 500.0)  # as a PPO run elsewhere stored it: solved at episode 100
+    store_arrays(tmp_path / "data" / "versus" / "ppo" / "seed_0_0123456789abcdef.npz",
+                 dict(returns=returns, env_steps=np.cumsum(returns), cpu_s=np.float64(90.0),
+                      play=np.full(100, 500.0)))
+    argv = ["versus", "--seeds", "0", "--agents", "ppo", "--out", str(tmp_path)]
+    assert reproduce_main([*argv, "--stored-only"]) == 0
+    assert "| PPO, rl-zoo3's hyperparameters (stable-baselines3) | 1 of 1 |" in \
+        (tmp_path / "VERSUS.md").read_text()
+    capsys.readouterr()
+    assert reproduce_main(argv) == 2
+    assert "need the baselines extra" in capsys.readouterr().err.strip().splitlines()[-1]
 
 
 def as_in_a_terminal() -> None:

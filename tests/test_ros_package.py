@@ -102,6 +102,33 @@ def test_setup_installs_the_manifest_marker_launch_file_and_an_executable_per_no
                               "recorder", "run_all", "echo", "topics"}
 
 
+def test_an_executable_missing_a_dependency_names_it_not_the_sourcing(tmp_path):
+    """`ros2 run clnn_ros reproduce` where the workspace's pip line had left out matplotlib
+    (issue 47): the error blamed sourcing. Now it names the missing package."""
+    setup_distribution()  # writes the executables
+    (tmp_path / "matplotlib").mkdir()  # first on the path: an import of it fails as if absent
+    (tmp_path / "matplotlib" / "__init__.py").write_text(
+        "raise ModuleNotFoundError(\"No module named 'matplotlib'\", name='matplotlib')\n")
+    run = subprocess.run([sys.executable, str(PACKAGE_DIR / "build" / "launchers" / "reproduce"),
+                          "--help"], capture_output=True, text=True, timeout=120,
+                         env={**os.environ, "PYTHONPATH": str(tmp_path)})
+    assert run.returncode == 1 and run.stderr.strip().splitlines() == [
+        "reproduce: error: clnn_ros.reproduce.__main__ needs the Python package 'matplotlib', "
+        "which is not installed: pip install the packages that the README lists under In a "
+        "ROS 2 workspace"], run.stderr
+
+
+def test_the_readmes_workspace_pip_line_installs_every_dependency():
+    """The README's pip line for a colcon workspace: every package pyproject.toml needs (it
+    left out matplotlib, which package.xml lists: `ros2 run clnn_ros reproduce` failed)."""
+    line = next(line for line in (ROOT / "README.md").read_text().splitlines()
+                if line.startswith("pip install ") and "pyproject.toml's pins" in line)
+    needed = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["dependencies"]
+    given = {re.split(r"[=<>~]", word.strip('"'))[0].lower() for word in line.split()[2:]}
+    missing = [d for d in needed if re.split(r"[=<>~]", d)[0].lower() not in given]
+    assert not missing, f"the README's pip line lacks {missing}: {line}"
+
+
 def test_an_executable_without_clnn_ros_on_the_path_says_so_in_one_line():
     """With pip's and colcon's copies both installed and the workspace not sourced, an
     executable looked its function up in the first clnn_ros distribution's metadata (pip's, no
@@ -182,13 +209,23 @@ def test_launch_arguments_are_run_alls_options(tmp_path):
     ({"env": "bullet"}, "env must be one of cartpole, gymnasium, mujoco, external or "
                         "gymnasium:ID, got 'bullet'"),
     ({"env": "gymnasium:Nope-v0"}, "gymnasium:Nope-v0: Environment `Nope` doesn't exist"),
-    ({"actions": "-1,1"}, "actions declares a Gymnasium task's values"),
+    ({"actions": "-1,1"}, "actions (-1,1) declares the values of a Gymnasium task's Box "
+                         "action space"),
     ({"namespace": "1robot"}, "namespace '1robot': expected letters, digits and _"),
+    ({"foo": "1"}, "unknown launch argument foo:=1; the arguments: seed, trials, "),
 ])
 def test_bad_launch_arguments_are_one_line(tmp_path, arguments, line):
     with pytest.raises(ParamError) as refused:
         launch_plan.plan(arguments, tmp_path)
     assert str(refused.value).startswith(line)
+
+
+def test_the_readme_lists_every_launch_argument():
+    """rate and protocol were missing there (issue 47)."""
+    text = " ".join((ROOT / "README.md").read_text().split())
+    listing = text[text.index("The launch arguments are"):][:600]
+    assert all(f"`{name}`" in listing for name in (*launch_plan.ARGUMENTS, launch_plan.RECORD)), \
+        listing
 
 
 GRAPH = ["recorder", *run_all.NODES]

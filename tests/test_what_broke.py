@@ -160,6 +160,7 @@ def test_the_bag_holds_what_trials_csv_holds_or_says_what_it_lacks(short_lease, 
         first, end = lacking[STATE][0] if lacking[STATE] else next(
             gaps[0] for gaps in lacking.values() if gaps)
         assert f"{first}-{end}" in last or f"{first}" in last
+        assert "; the recorder was stopped (SIGSTOP) for " in last, last  # and why (issue 47)
     else:
         assert "lacks" not in stderr
     assert steps_of(tmp_path) == core_steps(TRIALS)
@@ -168,10 +169,14 @@ def test_the_bag_holds_what_trials_csv_holds_or_says_what_it_lacks(short_lease, 
 FORGER = """
 import sys, time, rclpy
 from clnn_ros.session.rclpy_session import ros_session
-from clnn_ros_msgs.msg import SpikeVector
+from clnn_ros_msgs.msg import Observation, SpikeVector
+from rosgraph_msgs.msg import Clock
 # as a node of the graph's process: SIGINT ends the loop
 with ros_session(sys.argv) as signals:
     node = rclpy.create_node("forger")
+    # publishers held on two more graph topics, never used: each is named (issue 47)
+    held = [node.create_publisher(Observation, "env/observation", 10),
+            node.create_publisher(Clock, "clock", 10)]
     publisher = node.create_publisher(SpikeVector, "rln/spikes", 10)
     end = time.monotonic() + float(sys.argv[1])
     tick = 0
@@ -201,19 +206,23 @@ def test_a_recorder_stopped_past_the_stall_timeout_finishes_its_bag_and_the_lack
     _, stderr = process.communicate(timeout=HANG_S)
     assert process.returncode == 1, stderr[-3000:]
     lines = problem_lines(stderr)
-    assert lines[-1].startswith("run_all: error: stall: node 'recorder' fell behind at tick "), \
+    # the last line: the verdict, what the bag lacks and why (issue 47: the lack stood above)
+    reason, _, lack = lines[-1].removeprefix("run_all: error: ").partition("; the bag lacks ")
+    assert reason.startswith("stall: node 'recorder' fell behind at tick "), stderr[-3000:]
+    assert lack.startswith("ticks ") and "; the recorder was stopped (SIGSTOP) for " in lack, \
         stderr[-3000:]
-    assert lines[-2].startswith("run_all: warning: the bag lacks ticks "), stderr[-3000:]
     assert not any("terminated" in line or "killed" in line for line in lines), stderr[-3000:]
     metadata = yaml.safe_load((tmp_path / "bag" / "metadata.yaml").read_text())  # finished
     notes = metadata["rosbag2_bagfile_information"]["custom_data"]  # how far the run went
     ticks = json.loads((tmp_path / "summary.json").read_text())["ticks"]
-    assert notes == {"clnn_ros.run_end": lines[-1].removeprefix("run_all: error: "),
+    assert notes == {"clnn_ros.run_end": reason,
                      "clnn_ros.run_last_tick": str(ticks - 2)}, notes  # its last tick unfinished
     analysis = subprocess.run([sys.executable, "-m", "clnn_ros.analysis", str(tmp_path / "bag"),
                                "--out", str(tmp_path / "analysis")], env=ros_env,
                               capture_output=True, text=True, timeout=300)
     assert analysis.returncode == 0, analysis.stderr
+    assert analysis.stderr.strip().splitlines()[-1].startswith(
+        "analyze: warning: the bag ends before the run: "), analysis.stderr  # not only in summary
     summary = (tmp_path / "analysis" / "summary.md").read_text()
     assert f"the run to tick {ticks - 2} (run_all's note in metadata.yaml" in summary, summary
     assert "**the bag ends before the run**" in summary, summary
@@ -239,7 +248,8 @@ def test_a_foreign_publisher_is_named_and_the_run_never_reported_completed(
     os.kill(environment, signal.SIGSTOP)
     forger = subprocess.Popen([sys.executable, "-c", FORGER, str(HANG_S)], env=ros_env,
                               stderr=subprocess.PIPE, text=True)
-    named = "a foreign publisher on rln/spikes: node 'forger' in namespace /"
+    named = "a foreign publisher on clock, env/observation, rln/spikes: node 'forger' in " \
+            "namespace /"
     try:
         with open(errors) as stream:  # a bound on a hang: the run is held until then
             deadline = time.monotonic() + HANG_S

@@ -48,7 +48,7 @@ import numpy as np
 
 from .data import (input_labels, is_cartpole, read_bag, trial_returns, trial_rows,
                    trial_series)
-from .summary import summary_markdown
+from .summary import bag_shortfall, summary_markdown
 from ..bag import METADATA_FILE, BagError
 from ..cli import OneLineArgumentParser
 from ..files import cannot_create, describe_write_error
@@ -269,7 +269,10 @@ def main(argv=None) -> int:
     rows = result["rows"]
     mean = f", mean steps {np.mean([r[3] for r in rows]):.1f}" if rows else ""
     print(f"analyze: {len(rows)} trials{mean}; wrote {', '.join(result['produced'])} and "
-          f"summary.md to {out}")
+          f"summary.md to {out}", flush=True)
+    if short := bag_shortfall(result["data"], result["data"]["notes"], result["episode_end"]):
+        print(f"analyze: warning: the bag ends before the run: {short.replace('`', '')}",
+              file=sys.stderr)
     return 0
 
 

@@ -158,16 +158,18 @@ def run_end(end, notes: dict) -> tuple[str, int | None, str]:
     return "", None, ""
 
 
-def bag_short_of_the_run(data: dict, run_last: int | None, source: str) -> list[str]:
-    """A line when a per-tick topic's last tick in the bag comes before the run's last tick."""
+def bag_shortfall(data: dict, notes: dict, end) -> str:
+    """Where a per-tick topic's last tick in the bag comes before the run's last tick, what the
+    bag lacks, in one phrase ('' if nothing): in summary.md and on analyze's own output."""
+    _, run_last, source = run_end(end, notes)
     ticks = data["ticks"]
     last = {topic: max(ticks[topic], default=-1) for topic in PER_TICK if topic in ticks}
     if run_last is None or not last or min(last.values()) >= run_last:
-        return []
+        return ""
     topic = min(last, key=last.get)
-    return [f"* **the bag ends before the run**: `{shown(data, topic)}` up to tick "
-            f"{last[topic]}, the run to tick {run_last} ({source}; the recorder fell behind or "
-            f"stopped: the bag lacks ticks {last[topic] + 1}-{run_last})"]
+    return f"`{shown(data, topic)}` up to tick {last[topic]}, the run to tick {run_last} " \
+           f"({source}; the recorder fell behind or stopped: the bag lacks ticks " \
+           f"{last[topic] + 1}-{run_last})"
 
 
 def mean_return(rows, returns: dict) -> str:
@@ -194,7 +196,7 @@ def summary_markdown(bag_path: Path, result: dict, salvage: bool) -> str:
     params = data["params"]
     cap = params.max_steps
     end = result["episode_end"]
-    reason, run_last, source = run_end(end, data["notes"])
+    reason, run_last, _ = run_end(end, data["notes"])
     inputs = result["final"].shape[2] if result["final"] is not None else params.n_inputs
     lines = [f"# Analysis of `{bag_path.name}`", "",
              "Rebuilt from the bag alone by `python -m clnn_ros.analysis`"
@@ -205,7 +207,8 @@ def summary_markdown(bag_path: Path, result: dict, salvage: bool) -> str:
              *task_line(data),
              *environment_lines(data, input_labels(data, inputs)),
              "* how it ended: " + how_it_ended(end, reason, run_last),
-             *bag_short_of_the_run(data, run_last, source),
+             *([f"* **the bag ends before the run**: {short}"]
+               if (short := bag_shortfall(data, data["notes"], end)) else []),
              f"* trials completed: {len(rows)}" + (
                  f"; mean successful steps {np.mean(steps):.1f}, best {max(steps):,}, last "
                  f"{steps[-1]:,}" if rows else "") + mean_return(rows, returns),

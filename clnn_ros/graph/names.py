@@ -51,7 +51,8 @@ SAVE_CHECKPOINT = "~/save_checkpoint"
 # environment node written against it publishes and reads. The checker prints it.
 ENV_CONTRACT_VERSION = 4
 # The nodes the trial manager waits for before the first tick, and the recorder's name.
-GRAPH_NODES = ("environment", "encoder", "reward", "agent")
+ENVIRONMENT = "environment"
+GRAPH_NODES = (ENVIRONMENT, "encoder", "reward", "agent")
 # The graph nodes that run on the graph's sim time (use_sim_time, whose TimeSource subscribes
 # /clock): the environment, per its contract (docs/ENV_CONTRACT.md). The others read no ROS time.
 SIM_TIME_NODES = ("environment",)
@@ -61,9 +62,9 @@ RECORDER = "recorder"
 # runs in the namespace (0 done, 1 failed, 2 bad input, 128 + N signal N).
 NOT_STARTED = 3
 # Who publishes what within a tick, in causal order.
-PUBLISHED_BY = {CLOCK: TRIAL_MANAGER, TRIAL_EVENT: TRIAL_MANAGER, STATE: "environment",
+PUBLISHED_BY = {CLOCK: TRIAL_MANAGER, TRIAL_EVENT: TRIAL_MANAGER, STATE: ENVIRONMENT,
                 SPIKES: "encoder", REWARD: "reward", ACTION: "agent", WEIGHTS: "agent",
-                INPUT_LABELS: "encoder", MARKERS: "environment", TASK: "environment"}
+                INPUT_LABELS: "encoder", MARKERS: ENVIRONMENT, TASK: ENVIRONMENT}
 
 
 def absolute(topic: str, namespace: str = "/") -> str:

@@ -10,10 +10,14 @@ from dataclasses import dataclass
 
 from ..core.params import ParamError, Params
 from ..core.task import Action, Task, Variable
-from .names import ENV_CONTRACT_VERSION
+from .names import ENV_CONTRACT_VERSION, OLDER_STATE, TASK
 
 # TrialEvent.end_reason of a trial that terminated for a reason its task does not name
 TERMINATED = "terminated"
+# Why the graph does not start with an environment node that publishes on names.OLDER_STATE.
+OLDER_CONTRACT = (f"the environment node speaks contract version 3 or older (it publishes "
+                  f"{OLDER_STATE}, no {TASK}): docs/ENV_CONTRACT.md, \"Versions\", says what to "
+                  f"change for version {ENV_CONTRACT_VERSION}")
 
 
 @dataclass(frozen=True)

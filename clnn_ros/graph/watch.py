@@ -10,7 +10,7 @@ from __future__ import annotations
 import os
 from collections import Counter
 
-from .names import PUBLISHED_BY
+from .names import ENVIRONMENT, PUBLISHED_BY
 
 # What rmw names a publisher whose participant's node list has not arrived yet (it comes apart
 # from the endpoints, e.g. after a paused participant is rediscovered): asked again next time.
@@ -39,9 +39,36 @@ def foreign_publishers(publishers: dict[str, list[tuple[str, str]]],
             node != UNKNOWN_NODE]
 
 
-def describe_foreign(found: tuple[str, str, str]) -> str:
-    topic, node, namespace = found
-    return f"a foreign publisher on {topic}: node '{node}' in namespace {namespace}"
+def describe_foreign(found: list[tuple[str, str, str]]) -> str:
+    """The first foreign node found, with every graph topic it publishes on."""
+    _, node, namespace = found[0]
+    topics = sorted(topic for topic, *who in found if who == [node, namespace])
+    return f"a foreign publisher on {', '.join(topics)}: node '{node}' in namespace {namespace}"
+
+
+def names_pending(publishers: dict[str, list[tuple[str, str]]]) -> bool:
+    """Whether a publisher on a graph topic has no node name yet (it comes after the endpoint)."""
+    return any(node == UNKNOWN_NODE for endpoints in publishers.values() for node, _ in endpoints)
+
+
+def renamed_environment(publishers: dict[str, list[tuple[str, str]]], namespace: str,
+                        environment_present: bool) -> str | None:
+    """With no node named environment in the namespace, another that publishes its topics: an
+    environment node renamed (-r __node:=brain) that ran as the graph's was named a foreign
+    publisher after a while, or a short run completed (issue 47); now the start waits for the
+    environment by name, and this says why it never comes."""
+    if environment_present:
+        return None
+    strangers = [(topic, node, node_namespace) for topic, endpoints in sorted(publishers.items())
+                 if PUBLISHED_BY[topic] == ENVIRONMENT
+                 for node, node_namespace in endpoints if node != UNKNOWN_NODE]
+    if not strangers:
+        return None
+    _, node, node_namespace = strangers[0]
+    topics = sorted(topic for topic, *who in strangers if who == [node, node_namespace])
+    return (f"no node named '{ENVIRONMENT}' in namespace {namespace}: node '{node}' (namespace "
+            f"{node_namespace}) publishes {', '.join(topics)}; the graph takes an environment "
+            f"node by its name (renamed, -r __node:={node}, it is none: docs/ENV_CONTRACT.md)")
 
 
 def graph_claim(started_ns: int, token: str) -> str:

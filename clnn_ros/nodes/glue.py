@@ -150,6 +150,13 @@ def endpoints_matched(extra_nodes: str, outputs: list[tuple[object, int]],
     return matched
 
 
+def publishers_by_topic(node: Node, topics) -> dict[str, list[tuple[str, str]]]:
+    """{topic: [(node name, namespace) of each publisher]} as the ROS graph has them now."""
+    return {topic: [(info.node_name, info.node_namespace) for info in
+                    node.get_publishers_info_by_topic(node.resolve_topic_name(topic))]
+            for topic in topics}
+
+
 class Readiness:
     """Announces the node's name on READY once `is_ready()` (endpoints_matched), then again
     every READY_REPEAT_S until `is_running()`: a trial manager that missed the one announcement

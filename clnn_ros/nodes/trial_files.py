@@ -48,3 +48,9 @@ class TrialFiles:
             self.log_error(describe_write_error(error))
             return describe_write_error(error)
         return None
+
+
+def progress_line(trial: int, trials: int, steps: list[int], rate: float) -> str:
+    """The line printed as trial `trial` (from 1) ends."""
+    return f"trial {trial:4d}/{trials}  steps {steps[-1]:6d}  mean {np.mean(steps):8.1f}  " \
+           f"{rate:7.0f} ticks/s"

@@ -5,28 +5,27 @@ trials, ends the episode, reports progress, and detects a stalled graph.
     python -m clnn_ros.nodes.trial_manager --ros-args -p seed:=1 -p trials:=32 -p out_dir:=out
 
 Before the first tick it checks the environment's task (env/task, contract version 4) against
-the run's parameters; a node that speaks an older version is named as such. Tick t is done when
-it holds the environment's observation(t) and the agent's action(t); then it
-publishes clock(t+1), preceded by END/START (or EPISODE_END) events when the trial is over.
+the run's and waits for each node by its name (a renamed environment or one of an older version
+is named as such). Tick t is done when it holds observation(t) and action(t); then it publishes
+clock(t+1), preceded by END/START (or EPISODE_END) events when the trial is over.
 
 What ends an episode early, with exit status 1 and the node to blame:
-* a stall: no tick completes for `stall_timeout_s` of the trial manager's own running time (a
-  trial manager that was itself paused or starved does not count the pause, one kept busy, e.g.
-  refusing a flood, counts its CPU time); the node named is the first of the tick's chain whose
-  message for the tick is missing;
-* a node of `external_nodes` that leaves the ROS graph (the nodes run_all or launch started
-  are theirs to watch: they see the process exit; a paused one that drops out is alive);
+* a stall: no tick completes for `stall_timeout_s` of its own running time (its own pause or
+  starvation does not count); the node named is the first of the tick's chain whose message for
+  the tick is missing;
+* a node of `external_nodes` that leaves the ROS graph (run_all or launch see the exit of the
+  nodes they started; a paused one that drops out is alive);
 * another graph of the same names in the namespace and domain (its claim, GraphClaim; its
   lockstep traffic before this graph's first tick; names two nodes carry for `stall_timeout_s`
   with no other trial manager about: SharedNames): NOT_STARTED, the run abandoned with no
   EPISODE_END (the other's nodes would obey it); a node of `external_nodes` not there within
   `stall_timeout_s` once the rest is up (the others are waited for as long as they take);
-* a foreign publisher on a graph topic once running (graph.watch), unless
-  allow_foreign_publishers: then the run goes on and ends "tainted", never "completed".
+* a foreign publisher on a graph topic once running (graph.watch: named with each graph topic it
+  publishes on, looked at once its endpoint matches), unless allow_foreign_publishers: then
+  the run goes on and ends "tainted", never "completed".
 With a recorder it keeps the clock at most RECORDER_WINDOW ticks ahead of the recorder's
-progress, so that no message is lost to a slow recorder. Results go to out_dir as each trial
-ends (trials.csv; written to a temporary file, then renamed: a full disk keeps the last whole
-file) and at the end (final_weights.npy, summary.json).
+progress. Results go to out_dir as each trial ends (trials.csv) and at the end
+(final_weights.npy, summary.json).
 """
 
 from __future__ import annotations
@@ -38,6 +37,7 @@ import numpy as np
 from clnn_ros_msgs.msg import (Action, Observation, Reward, SpikeVector, TaskDescription,
                                TrialEvent, WeightSnapshot)
 from rosgraph_msgs.msg import Clock
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.task import Future
 from std_msgs.msg import String, UInt64
@@ -45,18 +45,19 @@ from std_msgs.msg import String, UInt64
 from ..core.episode import initial_angles
 from ..graph.fields import ACTION_NONE, COMPLETED, REACHED_MAX_STEPS, tick_nanoseconds, tick_stamp
 from ..graph.lockstep import Refusals, RunningTime, TickJoin
-from ..graph.names import (ACTION, CLOCK, ENV_CONTRACT_VERSION, GRAPH_NODES, NOT_STARTED,
-                           OLDER_STATE, PUBLISHED_BY, READY, RECORDED, RECORDER, REWARD, SPIKES,
-                           STATE, TASK, TRIAL_EVENT, TRIAL_MANAGER, WEIGHTS)
-from ..graph.task_description import described, description_problem
+from ..graph.names import (ACTION, CLOCK, ENVIRONMENT, GRAPH_NODES, NOT_STARTED, OLDER_STATE,
+                           PUBLISHED_BY, READY, RECORDED, RECORDER, REWARD, SPIKES, STATE, TASK,
+                           TRIAL_EVENT, TRIAL_MANAGER, WEIGHTS)
+from ..graph.task_description import OLDER_CONTRACT, described, description_problem
 from ..graph.qos import RECORDER_WINDOW
 from ..graph.run import NODE_PARAMETERS, names_list
-from ..graph.watch import another_graph, describe_foreign, foreign_publishers, gone, named_twice
+from ..graph.watch import (another_graph, describe_foreign, foreign_publishers, gone, named_twice,
+                           names_pending, renamed_environment)
 from ..core.init_weights import episode_start
-from .trial_files import TrialFiles
+from .trial_files import TrialFiles, progress_line
 from .glue import (LABELS_QOS, LOCKSTEP_QOS, PROGRESS_QOS, READY_QOS, GraphClaim, Pace, Readiness,
-                   SharedNames, checked, declare_run_parameters, endpoints_matched, run_node,
-                   steady_clock, use_sim_time)
+                   SharedNames, checked, declare_run_parameters, endpoints_matched,
+                   publishers_by_topic, run_node, steady_clock, use_sim_time)
 
 WATCHDOG_S = 0.1
 GRAPH_CHECK_S = 0.5  # how often the ROS graph is looked at once running (before: every check)
@@ -86,8 +87,7 @@ class TrialManagerNode(Node):
         # a resumed episode (init_weights: a checkpoint) starts at the checkpoint's next trial
         self.trial = episode_start(self.settings["init_weights"], self.settings["seed"],
                                    self.params, NODE_PARAMETERS[TRIAL_MANAGER]).first_trial
-        self.started_at = None
-        self.ready = set()
+        self.started_at, self.ready = None, set()
         self.external_nodes = names_list(self.settings["external_nodes"])
         self.expected = set(GRAPH_NODES) | self.extra_nodes
         self.in_graph = set()  # nodes of the graph seen in the ROS graph
@@ -96,7 +96,7 @@ class TrialManagerNode(Node):
         self.running = RunningTime(cap=2 * WATCHDOG_S)
         self.stalled_s = 0.0  # running time of this node without progress
         self.shared_names = []  # before the start: names two nodes carry
-        self.tainted = None  # a foreign publisher seen on a graph topic
+        self.tainted = self.foreign_seen = None  # a foreign publisher seen on a graph topic
         self.named_twice = set()  # graph names two nodes carried once the graph ran
         self.exit_reason = ""
         self.join = TickJoin((STATE, ACTION), self.on_tick, self.refusals)
@@ -105,13 +105,14 @@ class TrialManagerNode(Node):
         self.current = {topic: -1 for topic in CHAIN}  # the last tick each topic gave
         self.clock_pub = self.create_publisher(Clock, CLOCK, LOCKSTEP_QOS)
         self.event_pub = self.create_publisher(TrialEvent, TRIAL_EVENT, LOCKSTEP_QOS)
-        inputs = [self.create_subscription(
-            msg_type, topic, checked(topic, self.params, self.refusals, self.seen(topic)),
-            LOCKSTEP_QOS)
-            for msg_type, topic in ((Observation, STATE), (SpikeVector, SPIKES),
-                                    (Reward, REWARD), (Action, ACTION))]
-        inputs.append(self.create_subscription(WeightSnapshot, WEIGHTS, checked(
-            WEIGHTS, self.params, self.refusals, self.on_weights), LOCKSTEP_QOS))
+        self.look_again = False  # a publisher that joined is looked at once its endpoint matches
+        joined = SubscriptionEventCallbacks(matched=self.on_matched)
+        inputs = [self.create_subscription(msg_type, topic, checked(
+            topic, self.params, self.refusals,
+            self.on_weights if topic == WEIGHTS else self.seen(topic)), LOCKSTEP_QOS,
+            event_callbacks=joined) for msg_type, topic in (
+            (Observation, STATE), (SpikeVector, SPIKES), (Reward, REWARD), (Action, ACTION),
+            (WeightSnapshot, WEIGHTS))]
         # the clock goes to the environment; trial events to the four other nodes
         self.matched = endpoints_matched(self.settings["extra_nodes"],
                                          [(self.clock_pub, 1), (self.event_pub, 4)], inputs)
@@ -180,7 +181,8 @@ class TrialManagerNode(Node):
         """Start once the graph is ready; afterwards watch for a stall and for nodes leaving."""
         now = time.monotonic()
         running = self.running.since_last_check()  # a pause of this process is no stall
-        if now - self.last_graph_check >= GRAPH_CHECK_S or self.started_at is None:
+        if now - self.last_graph_check >= GRAPH_CHECK_S or self.started_at is None or \
+                self.look_again:
             self.last_graph_check = now
             if problem := self.graph_problem():
                 self.stop(1, problem)
@@ -193,8 +195,8 @@ class TrialManagerNode(Node):
             self.stop(1, self.stall_reason())
 
     def graph_problem(self) -> str | None:
-        """Names two nodes carry (before the start, check_start holds it; after, a warning and a
-        taint), a node started by someone else that left, a foreign publisher once running."""
+        """Shared names (check_start holds the start; later a taint), a node that left, a renamed
+        environment before the start, a foreign publisher once running."""
         namespace = self.get_namespace()
         present = Counter(name for name, ns in self.get_node_names_and_namespaces()
                           if ns == namespace)
@@ -215,19 +217,25 @@ class TrialManagerNode(Node):
         self.in_graph |= {n for n in self.expected if present[n]}
         if left := gone(self.in_graph, present, self.external_nodes):
             return f"node '{left[0]}' left the ROS graph at tick {self.join.tick}"
-        if self.started_at is None:  # before the first tick its traffic judges it (seen): one
-            return None  # outcome, not a race of its name's discovery and its first message
-        foreign = foreign_publishers({topic: [
-            (info.node_name, info.node_namespace)
-            for info in self.get_publishers_info_by_topic(self.resolve_topic_name(topic))]
-            for topic in PUBLISHED_BY}, namespace)
-        if foreign and not self.tainted:
-            self.tainted = describe_foreign(foreign[0])
+        publishers = publishers_by_topic(self, PUBLISHED_BY)
+        self.look_again = names_pending(publishers)  # a name still to come: look next check
+        if self.started_at is None:  # the start waits for the environment by name; another's
+            # traffic before the first tick judges it (seen): no race of name and message
+            return renamed_environment(publishers, namespace, ENVIRONMENT in self.in_graph)
+        foreign = foreign_publishers(publishers, namespace)
+        if foreign and not self.tainted and describe_foreign(foreign) != self.foreign_seen:
+            # its other topics' endpoints may come a moment later: named once it holds still
+            self.foreign_seen, self.look_again = describe_foreign(foreign), True
+        elif foreign and not self.tainted:
+            self.tainted = self.foreign_seen
             if not self.settings["allow_foreign_publishers"]:
                 return f"{self.tainted} at tick {self.join.tick} (its messages may have been " \
                        f"taken for the graph's; allow_foreign_publishers: go on, tainted)"
             self.get_logger().warning(f"{self.tainted}: the run goes on, its results tainted")
         return None
+
+    def on_matched(self, status) -> None:
+        self.look_again = self.look_again or status.current_count_change > 0
 
     def on_other_graph(self, started_first: bool) -> None:
         """The claim of another graph's trial manager in this namespace and domain."""
@@ -239,10 +247,8 @@ class TrialManagerNode(Node):
                                       f"{self.join.tick}: it gives way")
 
     def watch_recorder(self, present: bool) -> None:
-        """Paused beyond its DDS lease, the recorder drops out of the ROS graph: what the graph
-        sends it meanwhile is lost, and the progress that would release a held tick never
-        comes. The graph goes on without it until it is back (the bag lacks those ticks, and
-        run_all says which)."""
+        """Paused past its DDS lease, the recorder drops out of the ROS graph: the graph goes on
+        without it until it is back (the bag lacks those ticks, and run_all says which)."""
         if not present and not self.recorder_out:
             self.recorder_out = True
             self.get_logger().warning(f"the recorder left the ROS graph at tick {self.join.tick} "
@@ -255,16 +261,13 @@ class TrialManagerNode(Node):
 
     def on_task(self, msg: TaskDescription) -> None:
         if self.task is None and (problem := description_problem(msg, self.params)):
-            self.stop(1, f"the environment node's task (env/task) does not fit the run: "
-                         f"{problem}")
+            self.stop(1, f"the environment node's task (env/task) does not fit the run: {problem}")
         elif self.task is None:
             self.task = described(msg)
 
     def check_start(self, now: float, running: float) -> None:
         if self.task is None and self.count_publishers(self.resolve_topic_name(OLDER_STATE)):
-            self.stop(1, f"the environment node speaks contract version 3 or older (it publishes "
-                         f"{OLDER_STATE}, no {TASK}): docs/ENV_CONTRACT.md, \"Versions\", says "
-                         f"what to change for version {ENV_CONTRACT_VERSION}")
+            self.stop(1, OLDER_CONTRACT)
             return
         contested = self.claim.contested()
         hold, give_way = self.names.check(self.shared_names, contested, running)
@@ -274,7 +277,8 @@ class TrialManagerNode(Node):
         if hold:  # whose announcement? (nodes repeat)
             self.ready.clear()
         missing = self.expected - self.ready
-        if not (missing or hold) and self.matched() and self.task is not None:
+        if not (missing or hold) and self.matched() and self.task is not None and \
+                self.expected <= self.in_graph:  # each by its name, not only its announcement
             self.started_at = now
             self.advance(0, starts_trial=True)
             return
@@ -326,14 +330,12 @@ class TrialManagerNode(Node):
         self.clock_pub.publish(clock)
 
     def on_tick(self, inbox: dict) -> None:
-        state, action = inbox[STATE], inbox[ACTION]
+        state, action, tick = inbox[STATE], inbox[ACTION], inbox[STATE].tick
         self.stalled_s = 0.0
-        tick = state.tick
         if action.action != ACTION_NONE:
             self.advance(tick + 1, starts_trial=False)
             return
-        reason = self.task.end_reason(state.termination) if state.terminated \
-            else REACHED_MAX_STEPS
+        reason = self.task.end_reason(state.termination) if state.terminated else REACHED_MAX_STEPS
         self.trial_end_tick = tick
         self.results.append((self.trial, float(self.angles[self.trial]), state.successful_steps,
                              reason))
@@ -353,12 +355,10 @@ class TrialManagerNode(Node):
             self.finish_when_weights_arrive()
 
     def report(self, tick: int) -> None:
-        if not self.settings["progress"]:
-            return
-        steps = [r[2] for r in self.results]
-        rate = tick / max(time.monotonic() - self.started_at, 1e-9)
-        print(f"trial {self.trial + 1:4d}/{len(self.angles)}  steps {steps[-1]:6d}  "
-              f"mean {np.mean(steps):8.1f}  {rate:7.0f} ticks/s", flush=True)
+        if self.settings["progress"]:
+            rate = tick / max(time.monotonic() - self.started_at, 1e-9)
+            print(progress_line(self.trial + 1, len(self.angles), [r[2] for r in self.results],
+                                rate), flush=True)
 
     # --- the end ------------------------------------------------------------------------------
 

@@ -35,6 +35,8 @@ ARGUMENTS = {
     "nsv": f"1: angle; 2: angle + cart velocity (default {DEMO['nsv']})",
     "state_vars": "the encoded state variables instead, in input order, e.g. "
                   "pole_angle,cart_position",
+    "max_steps": "successful steps that end a trial (default: the protocol's, 10000 for the "
+                 "paper's; 500 for gymnasium)",
     "stall_timeout": "seconds without a tick before the trial manager ends the run (default "
                      f"{RUN_SETTINGS['stall_timeout_s']:g}; also how long env:=external's node is "
                      "waited for)",
@@ -53,9 +55,11 @@ ARGUMENTS = {
            "bags/run_<UTC time>)",
 }
 RUN_VALUES = {"seed": "seed", "trials": "trials", "nsv": "nsv", "state_vars": "state_vars",
-              "stall_timeout": "stall_timeout_s", "rate": "rate_hz",
+              "max_steps": "max_steps", "stall_timeout": "stall_timeout_s", "rate": "rate_hz",
               "protocol": "protocol"}  # launch argument: run value
 RECORD = "record"  # launch argument: true (default) or false, as run_all's --no-record
+# launch configurations that ros2 launch sets itself (its --launch-prefix, --launch-prefix-filter)
+LAUNCH_OWN = ("launch-prefix", "launch-prefix-filter")
 
 
 @dataclass(frozen=True)
@@ -69,8 +73,13 @@ class NodeLaunch:
 
 
 def plan(arguments: dict[str, str], workdir: Path) -> list[NodeLaunch]:
-    """The nodes to start, the run's params files written into workdir. A bad argument is a
-    ParamError with one line."""
+    """The nodes to start, the run's params files written into workdir. A bad argument, or one
+    the launch file does not declare (launch itself takes any `name:=value`), is a ParamError
+    with one line."""
+    if unknown := sorted(set(arguments) - {*ARGUMENTS, RECORD}):
+        raise ParamError(f"unknown launch argument {unknown[0]}:={arguments[unknown[0]]}; the "
+                         f"arguments: {', '.join((*ARGUMENTS, RECORD))} (ros2 launch clnn_ros "
+                         f"graph.launch.py --show-args)")
     given = {name: value for name, value in arguments.items() if value != ""}
     env = given.get("env", "cartpole")
     if env not in ENVIRONMENTS and not env.startswith(PREFIX):

@@ -113,6 +113,8 @@ class Child:
         self.name = name
         self.shows_stacks = shows_stacks  # on SHOW_STACKS (process_signals.catch_signals)
         self.tail = deque(maxlen=TAIL_LINES)
+        # the time it was seen stopped (SIGSTOP): look_whether_stopped, Supervisor.stop
+        self.stopped_s, self._looked_at = 0.0, time.monotonic()
         self.process = subprocess.Popen(command, stdin=subprocess.PIPE, stderr=subprocess.PIPE,
                                         env=env)
         self._reader = threading.Thread(target=self._pass_stderr, daemon=True,
@@ -143,6 +145,12 @@ class Child:
         """The message of the child's last error line, if it wrote one."""
         self._reader.join(timeout=1.0)  # its last lines
         return next((m.group(1) for m in map(OWN_ERROR.match, reversed(self.tail)) if m), None)
+
+    def look_whether_stopped(self) -> None:
+        now = time.monotonic()
+        if stopped(self.process.pid):
+            self.stopped_s += now - self._looked_at
+        self._looked_at = now
 
     def last_lines(self) -> list[str]:
         return list(self.tail)
@@ -214,7 +222,9 @@ class Supervisor:
                     say(f"run_all: node {child.name} is stopped (SIGSTOP?): waiting for it to "
                         f"continue (kill -CONT {child.process.pid})")
                 return within
-            if child.wait_while(allowed):
+            ended = child.wait_while(allowed)
+            child.stopped_s += grace.stopped_s
+            if ended:
                 continue
             if child.shows_stacks:  # where it hangs, in the run's log
                 say(f"run_all: node {child.name} is slow to exit; the stacks of its threads:")
@@ -270,11 +280,11 @@ def child_environment() -> dict:
 def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
                  env_command: list[str] | None, namespace: str,
                  interrupted: list[int], began: float,
-                 bag_path: Path | None) -> tuple[int, bool]:
+                 bag_path: Path | None) -> tuple[int, str | None]:
     """Start the nodes (env_command None: no environment) and watch them until the trial
-    manager ends. Returns (its exit status, or 128 + signal; whether run_all saw a process fail
-    itself, and said so: one that exited with an error or a signal, or that someone else
-    stopped before the episode ended)."""
+    manager ends. Returns (its exit status, or 128 + signal; the failure run_all saw itself, or
+    None: a process that exited with an error or a signal, or that someone else stopped before
+    the episode ended)."""
     arguments = node_arguments(write_params(workdir / "params.yaml", values), namespace)
     for name in NODES:
         command = env_command if name == "environment" else \
@@ -285,9 +295,12 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
                              command[2].startswith("clnn_ros."))
     manager = supervisor.children[TRIAL_MANAGER]
     failure, ended, outcome, status, since_quit = None, None, None, None, None
+    recorder = supervisor.children.get(RECORDER)
     while manager.returncode is None and not interrupted:
         if failure := supervisor.first_failure(exclude={TRIAL_MANAGER}):
             break
+        if recorder is not None:  # what a stopped recorder misses, run_all says why
+            recorder.look_whether_stopped()
         if ended is None and (outcome := fresh_summary(Path(values["out_dir"]), began)):
             ended = Grace(manager.process.pid)  # the episode is over and its results written
         # A node ends with status 0 after the episode's end, or when someone else stopped it
@@ -313,8 +326,7 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
         failure = manager  # stopped from outside: it sent no EPISODE_END
     # Ctrl-C reaches every process of the terminal's group: run_all's own handler has run long
     # before a child handled it and exited.
-    if failure is not None and not interrupted:
-        report_failure(failure, bag_path)
+    error = failure_of(failure, bag_path) if failure is not None and not interrupted else None
     nodes = [n for n in NODES if n in supervisor.children]
     # After a normal end every node has its EPISODE_END; after a failure a node that was still
     # starting may have missed it: they are told with SIGTERM. One still importing on a loaded
@@ -325,9 +337,7 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
     warn_forced([(name, how) for name, how in forced
                  if how != "terminated" or failure is None])
     status = manager.returncode if status is None else status
-    if interrupted:
-        return 128 + interrupted[0], False
-    return status, failure is not None
+    return (128 + interrupted[0], None) if interrupted else (status, error)
 
 
 def unfinished_bag(name: str, bag_path: Path | None) -> str:
@@ -338,11 +348,12 @@ def unfinished_bag(name: str, bag_path: Path | None) -> str:
         if name == RECORDER and bag_path is not None else ""
 
 
-def report_failure(child, bag_path: Path | None = None) -> None:
-    """The one error line, at once, then the last lines of the child's stderr."""
-    say(f"run_all: error: {child.describe_exit()}{unfinished_bag(child.name, bag_path)}")
+def failure_of(child, bag_path: Path | None = None) -> str:
+    """The last lines of a failed child's stderr, at once and together (they came amid the
+    others'); returns what the error line says of it (run_all's last line, processes.run_end)."""
     for line in child.last_lines():
         say(f"  {child.name}| {line}")
+    return f"{child.describe_exit()}{unfinished_bag(child.name, bag_path)}"
 
 
 def warn_forced(forced: list[tuple[str, str]]) -> None:
@@ -373,9 +384,8 @@ def stop_recorder(supervisor: Supervisor, episode_ended: bool) -> bool:
     trial manager stopped from outside), or when it is stopped (SIGSTOP: the end, sent while it
     could not take it, is gone with its sender), it is told to finish the bag now, which it does
     once continued. Returns whether it had to be terminated."""
-    paused = stopped(supervisor.children[RECORDER].process.pid)
-    forced = supervisor.stop([RECORDER], RECORDER_GRACE_S, interrupt=not episode_ended or paused)
-    warn_forced(forced)
+    told = not episode_ended or stopped(supervisor.children[RECORDER].process.pid)
+    warn_forced(forced := supervisor.stop([RECORDER], RECORDER_GRACE_S, interrupt=told))
     return bool(forced)
 
 

@@ -215,7 +215,7 @@ def run_all(args) -> None:
 def cmd_versus(args) -> None:
     seeds = parse_seeds(args.seeds)
     agents = [a.strip() for a in args.agents.split(",") if a.strip()]
-    check_agents(agents)
+    check_agents(agents, args.stored_only)
     if args.workers < 1:
         raise ValueError(f"--workers must be at least 1, got {args.workers}")
     out = Path(args.out)

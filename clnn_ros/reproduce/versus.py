@@ -14,6 +14,7 @@ an interrupted run resumes. ppo, dqn and dqn_4x need the baselines extra (pip in
 
 from __future__ import annotations
 
+import importlib.util
 import time
 from pathlib import Path
 
@@ -51,18 +52,20 @@ def rln_params() -> Params:
     return params_from_strings({**preset_values(PRESET), "trials": str(EPISODES)})
 
 
-def check_agents(names: list[str]) -> None:
-    """ValueError with one line for an unknown agent, or a deep-RL one without its extra."""
+def has_baselines_extra() -> bool:
+    return all(importlib.util.find_spec(name) is not None
+               for name in ("rl_zoo3", "stable_baselines3"))
+
+
+def check_agents(names: list[str], stored_only: bool = False) -> None:
+    """ValueError with one line for an unknown agent, or a deep-RL one to run without its extra
+    (the report of stored seeds, `stored_only`, runs none)."""
     for name in names:
         if name not in AGENTS:
             raise ValueError(f"unknown agent {name!r}; known: {', '.join(AGENTS)}")
-    if set(names) & set(DEEP):
-        try:
-            import rl_zoo3  # noqa: F401
-            import stable_baselines3  # noqa: F401
-        except ImportError:
-            raise ValueError(f"{', '.join(DEEP)} need the baselines extra: pip install -e "
-                             "'.[baselines]' (docs/VERSUS.md)") from None
+    if set(names) & set(DEEP) and not stored_only and not has_baselines_extra():
+        raise ValueError(f"{', '.join(DEEP)} need the baselines extra: pip install -e "
+                         "'.[baselines]' (docs/VERSUS.md)")
 
 
 def frozen_play(action, seed: int) -> np.ndarray:
@@ -102,10 +105,13 @@ def one_seed(agent: str, seed: int) -> dict:
                 play=frozen_play(run.action, seed))
 
 
-def agent_key(agent: str) -> list:
-    """What an agent's stored seeds depend on (a change runs them anew)."""
+def agent_key(agent: str) -> list | None:
+    """What an agent's stored seeds depend on (a change runs them anew); None for a deep-RL
+    agent without the baselines extra (its versions unknown here: stored_seed)."""
     if agent in ("rln", "rln_mujoco"):
         return [agent, rln_params().to_dict(), PLAY_EPISODES]
+    if agent in DEEP and not has_baselines_extra():
+        return None
     if agent in DEEP:
         from ..baselines.sb3_agents import zoo_entry
         import stable_baselines3
@@ -118,6 +124,15 @@ def agent_seeds(agent: str, seeds: list[int]) -> list[int]:
     return seeds[:FIRST_SEEDS[agent]] if agent in FIRST_SEEDS else seeds
 
 
+def stored_seed(folder: Path, seed: int, key: list | None) -> Path:
+    """Where an agent-seed is stored; with no key (a deep-RL agent's report without its extra),
+    the seed's latest stored file, whatever versions made it (docs/VERSUS.md names them)."""
+    if key is not None:
+        return store_path(folder, f"seed_{seed}", [key, seed])
+    found = sorted(folder.glob(f"seed_{seed}_*.npz"), key=lambda path: path.stat().st_mtime)
+    return found[-1] if found else folder / f"seed_{seed}_none.npz"
+
+
 def run_versus(agents: list[str], seeds: list[int], store: Path, workers: int,
                stored_only: bool = False) -> dict:
     """{agent: {seed: arrays}}: each agent-seed stored, or run now and stored (stored_only:
@@ -127,7 +142,7 @@ def run_versus(agents: list[str], seeds: list[int], store: Path, workers: int,
     for agent in agents:
         key = agent_key(agent)
         for seed in agent_seeds(agent, seeds):
-            path = store_path(store / agent, f"seed_{seed}", [key, seed])
+            path = stored_seed(store / agent, seed, key)
             if path.exists():
                 results[agent][seed] = load_stored(path)
             elif not stored_only:

@@ -1,39 +1,50 @@
 """The graph that `python -m clnn_ros.run_all` starts, one process per node, with its parameters:
 
     ros2 launch clnn_ros graph.launch.py [seed:=1] [trials:=32] [nsv:=2] [namespace:=robot1]
+        [state_vars:=pole_angle,cart_position] [max_steps:=N] [rate:=50] [protocol:=gymnasium]
         [env:=gymnasium|mujoco|external|gymnasium:ID] [actions:=-1,1] [out:=DIR]
-        [params_file:=FILE] [record:=false]
-        [bag:=DIR] [stall_timeout:=S]
+        [params_file:=FILE] [record:=false] [bag:=DIR] [stall_timeout:=S]
 
 Each argument is run_all's option of the same name (clnn_ros.processes.launch_plan): run_all checks
-them
-and makes the parameters files, here written into a temporary folder removed at shutdown.
+them and makes the parameters files, here written into a temporary folder removed at shutdown. An
+argument not declared here is refused in one line, before any node starts (launch itself keeps
+any `name:=value`).
 
 Supervised as run_all supervises its processes (launch_plan.Supervision, on launch's
 OnProcessExit): the episode's end (the trial manager exits 0, the others follow) ends the launch
 with exit 0; a node that fails (an error status, a signal, or stopped by someone else before the
-episode ended) ends it at once with one line naming it, `Caught exception in launch ...: node
-'agent' died (SIGKILL)`, and a non-zero exit (launch's LaunchService returns 1 after an
-exception). Exits during the launch's own shutdown (Ctrl-C, or after a failure) are expected.
+episode ended) ends it at once with one line naming it, `[ERROR] [clnn_ros]: node 'agent' died
+(SIGKILL)`, and exit status 1 (failed). Exits during the launch's own shutdown (Ctrl-C, or after
+a failure) are expected.
 """
 
+import asyncio
+import logging
 import shutil
 import tempfile
 from pathlib import Path
 
+import launch.logging
 from launch import LaunchDescription
 from launch.actions import (DeclareLaunchArgument, LogInfo, OpaqueFunction, RegisterEventHandler,
                             Shutdown, TimerAction)
 from launch.event_handlers import OnProcessExit, OnShutdown
-from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from clnn_ros.processes.launch_plan import ARGUMENTS, RECORD, Supervision, plan
+from clnn_ros.core.params import ParamError
+from clnn_ros.processes.launch_plan import ARGUMENTS, LAUNCH_OWN, RECORD, Supervision, plan
 
 
-class GraphFailed(Exception):
-    """A node of the graph failed: raised in the launch's loop, which then shuts down and
-    returns 1 (its only way to a non-zero exit); the message is the one line."""
+def failed(line):
+    """End the launch with `line` as its one error line and exit status 1. launch returns 1 only
+    after an error in its loop: an exception it reports as "Caught exception in launch (see
+    debug for traceback)", though there is none, or a call of the loop's exception handler
+    (launch's sets the status, then asyncio logs the message: that copy of our line is
+    dropped)."""
+    launch.logging.get_logger("clnn_ros").error(line)
+    logging.getLogger("asyncio").addFilter(lambda record: record.getMessage() != line)
+    asyncio.get_event_loop().call_exception_handler({"message": line})
+    return [Shutdown(reason=line)]
 
 
 class Supervisor:
@@ -57,7 +68,7 @@ class Supervisor:
 
     def carry_out(self, step):
         if step.fail:
-            raise GraphFailed(step.fail)
+            return failed(step.fail)
         if step.stop:
             return [LogInfo(msg=step.stop), Shutdown(reason=step.stop)]
         if step.timer is None:
@@ -73,13 +84,15 @@ class Supervisor:
 
 
 def graph_nodes(context):
-    arguments = {name: LaunchConfiguration(name).perform(context) for name in (*ARGUMENTS, RECORD)}
+    # every `name:=value` given (launch keeps undeclared ones too): plan refuses the unknown
+    arguments = {name: value for name, value in context.launch_configurations.items()
+                 if name not in LAUNCH_OWN}
     workdir = Path(tempfile.mkdtemp(prefix="clnn_ros_launch_"))
     try:
         planned = plan(arguments, workdir)
-    except BaseException:  # a refused argument (trials:=-3) leaves no directory behind
+    except ParamError as error:  # a refused argument (trials:=-3): no node, no directory
         shutil.rmtree(workdir, ignore_errors=True)
-        raise
+        return failed(f"graph.launch.py: error: {error}")
     supervisor = Supervisor([node.executable for node in planned],
                             next((node.bag_path for node in planned if node.bag_path), None))
     actions = [RegisterEventHandler(OnShutdown(
