@@ -308,15 +308,16 @@ def run(args, values: dict, checkpoint, supervisor: Supervisor, namespace: str,
                     recorder.returncode not in stopped_as_told:
                 error = failure_of(recorder, bag_path)
         summary = fresh_summary(out, began)
+    supervisor.close()  # the children's last lines, passed on before the verdict
+    lacking = "" if bag_path is None else report_bag(
+        bag_path, status, summary, recorder_forced,
+        supervisor.children[RECORDER].stopped_s if RECORDER in supervisor.children else 0.0)
     if summary and error is None and status != NOT_STARTED:  # the error line says why not
         mean = summary["mean_steps"]
         print(f"run_all: {summary['exit_reason']}: {summary['trials']} trials, mean steps "
               f"{mean if mean is None else round(mean, 1)}, {summary['ticks']} ticks, "
               f"{summary['ticks_per_s'] or 0.0:.0f} ticks/s"
-              + (f"; results in {args.out}" if args.out else ""))
-    lacking = "" if bag_path is None else report_bag(
-        bag_path, status, summary, recorder_forced,
-        supervisor.children[RECORDER].stopped_s if RECORDER in supervisor.children else 0.0)
+              + (f"; results in {args.out}" if args.out else ""), flush=True)
     # The verdict is the last line, what the bag lacks on it (issue 47)
     if error is None and status in (128 + signum for signum in STOP_SIGNALS):
         say("run_all: interrupted")

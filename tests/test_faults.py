@@ -83,21 +83,23 @@ def test_killed_process_is_named_at_once_and_the_graph_comes_down(ros_env, tmp_p
     assert not processes_with(str(tmp_path))
 
 
-@pytest.mark.parametrize("fault", ["agent", "trial_manager", "contract_v3"])
+@pytest.mark.parametrize("fault", ["none", "agent", "trial_manager", "contract_v3"])
 def test_the_last_line_is_the_verdict_with_the_bag_before_it(ros_env, tmp_path, fault):
-    """A node killed (-9), the trial manager killed, an environment node refused: stdout and
-    stderr together, as a terminal or a script reading the last line sees them, end with the
-    error line, the bag's line before it (issue 47: the error stood above `run_all: bag`)."""
+    """A node killed (-9), the trial manager killed, an environment node refused, or none:
+    stdout and stderr together, as a terminal or a script reading the last line sees them, end
+    with the verdict, the bag's line before it (issue 47: the error stood above `run_all:
+    bag`)."""
     output = tmp_path / "output.txt"
     extra = ["--env-node", f"python {BROKEN} contract_v3"] if fault == "contract_v3" else []
     with open(output, "w") as both:
         process = subprocess.Popen(
-            [sys.executable, "-m", "clnn_ros.run_all", "--seed", "1", "--trials", "400",
-             "--out", str(tmp_path), "--stall-timeout", "30", *extra],
+            [sys.executable, "-m", "clnn_ros.run_all", "--seed", "1", "--trials",
+             "2" if fault == "none" else "400", "--out", str(tmp_path), "--stall-timeout", "30",
+             *extra],
             env={**ros_env, "CLNN_TEST_RUN": str(tmp_path)}, stdout=both, stderr=both,
             start_new_session=True)
     try:
-        if fault != "contract_v3":
+        if fault not in ("none", "contract_v3"):
             deadline = time.monotonic() + HANG_S
             while "trial    2/" not in output.read_text() and time.monotonic() < deadline:
                 time.sleep(0.1)
@@ -107,13 +109,19 @@ def test_the_last_line_is_the_verdict_with_the_bag_before_it(ros_env, tmp_path, 
         if process.poll() is None:
             os.killpg(process.pid, signal.SIGKILL)
     lines = output.read_text().splitlines()
-    assert process.returncode == 1, lines[-20:]
-    verdict = {"agent": "node 'agent' died (SIGKILL)",
-               "trial_manager": "node 'trial_manager' died (SIGKILL)",
-               "contract_v3": "the environment node speaks contract version 3 or older"}[fault]
-    assert lines[-1].startswith(f"run_all: error: {verdict}"), lines[-20:]
-    assert lines[-2] in (f"run_all: bag {tmp_path / 'bag'}", "run_all: nothing recorded, no bag"), \
-        lines[-20:]
+    assert process.returncode == (0 if fault == "none" else 1), lines[-20:]
+    verdict = {"none": "run_all: completed: 2 trials",
+               "agent": "run_all: error: node 'agent' died (SIGKILL)",
+               "trial_manager": "run_all: error: node 'trial_manager' died (SIGKILL)",
+               "contract_v3": "run_all: error: the environment node speaks contract version 3 "
+                              "or older"}[fault]
+    assert lines[-1].startswith(verdict), lines[-20:]
+    # the bag's line before it, or before the summary of how far the run went, then the verdict
+    bag_line = next(line for line in reversed(lines) if line.startswith("run_all: bag ") or
+                    line == "run_all: nothing recorded, no bag")
+    after = lines[lines.index(bag_line) + 1:-1]
+    assert bag_line in (f"run_all: bag {tmp_path / 'bag'}", "run_all: nothing recorded, no bag")
+    assert after == [] or (len(after) == 1 and " trials, mean steps " in after[0]), lines[-20:]
     assert not processes_with(str(tmp_path))
 
 

@@ -272,19 +272,20 @@ def test_sweep_a_gymnasium_task_from_the_command_line(tmp_path, capsys):
     assert "variable_edges=x:-0.8,0.8;" in (tmp_path / "sweep_CartPole-v1.md").read_text()
 
 
-@pytest.mark.parametrize("name, changes", [
-    ("gymnasium:Acrobot-v1", {}),
-    ("gymnasium:LunarLander-v3", {"tie_break": "random", "rerandomize_every": "2",
-                                  "explore": "0.01", "tagging": "both_neurons"}),
+@pytest.mark.parametrize("name, actions, changes", [
+    ("gymnasium:Acrobot-v1", None, {}),
+    ("gymnasium:LunarLander-v3", None, {"tie_break": "random", "rerandomize_every": "2",
+                                        "explore": "0.01", "tagging": "both_neurons"}),
+    ("gymnasium:InvertedPendulum-v5", "-1,1", {}),  # each family Gymnasium builds differently
 ])
-def test_the_compiled_kernels_are_the_cores_bit_for_bit(name, changes):
+def test_the_compiled_kernels_are_the_cores_bit_for_bit(name, actions, changes):
     """The rule's costly functions compiled (what learn --task runs) give the core's episode."""
     from clnn_ros.batch import COMPILED_KERNELS
 
-    task, _ = make(name)
+    task, _ = make(name, actions)
     p = task_params(task, {"trials": "6", "sigma": "32", "omega": "64", **changes})
-    ours = run_task_episode(5, p, task, make(name)[1], kernels=COMPILED_KERNELS)
-    core = run_task_episode(5, p, task, make(name)[1])
+    ours = run_task_episode(5, p, task, make(name, actions)[1], kernels=COMPILED_KERNELS)
+    core = run_task_episode(5, p, task, make(name, actions)[1])
     assert ours.steps.tolist() == core.steps.tolist()
     assert ours.returns.tolist() == core.returns.tolist()
     assert np.array_equal(ours.final_weights, core.final_weights)

@@ -489,7 +489,10 @@ def test_of_two_graphs_started_at_once_one_gives_way_and_the_other_is_never_wron
     assert runs[gave_way[0]].returncode == 1
     assert len(problem_lines(ended[gave_way[0]][1])) == 1, ended[gave_way[0]][1][-2000:]
     assert not (tmp_path / gave_way[0] / "bag").exists()
+    # its recording line is answered (issue 47: the bag it named vanished without a word)
     assert "run_all: bag" not in ended[gave_way[0]][0]
+    assert f"run_all: removed the bag {tmp_path / gave_way[0] / 'bag'}: it held another " \
+           f"graph's messages" in ended[gave_way[0]][0], ended[gave_way[0]][0]
     core = run_episode(seeds[other], Params(trials=TRIALS, max_steps=MAX_STEPS)).steps.tolist()
     if runs[other].returncode == 0:
         assert "completed" in stdout and steps_of(tmp_path / other) == core
