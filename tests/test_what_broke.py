@@ -393,6 +393,56 @@ def test_the_nodes_of_a_graph_that_gave_way_are_waited_for_as_they_leave(ros_env
     assert not processes_with(str(tmp_path))
 
 
+WITHDRAWING = """
+import sys, rclpy
+from std_msgs.msg import String
+from clnn_ros.nodes.glue import CLAIM_QOS
+from clnn_ros.session.rclpy_session import ros_session
+from clnn_ros.graph.names import CLAIM
+from clnn_ros.graph.watch import withdrawal
+# A graph that gave way and withdrew its claim once it heard the other's, but whose participant
+# stays (as one whose DDS goodbye was lost stays until its lease ends), until SIGINT
+with ros_session(sys.argv) as signals:
+    node = rclpy.create_node("claimer")
+    heard = []
+    node.create_subscription(String, CLAIM, heard.append, CLAIM_QOS)
+    claim = node.create_publisher(String, CLAIM, CLAIM_QOS)
+    claim.publish(String(data=sys.argv[1]))
+    while not signals and len(heard) < 2:
+        rclpy.spin_once(node, timeout_sec=0.1)
+    claim.publish(String(data=withdrawal(sys.argv[1])))
+    print("withdrawn", flush=True)
+    while not signals:
+        rclpy.spin_once(node, timeout_sec=0.1)
+    node.destroy_node()
+"""
+
+
+def test_a_graph_that_withdrew_its_claim_holds_no_other(ros_env, tmp_path):
+    """A graph that gave way withdraws its claim: one whose goodbye to DDS was lost held the
+    graph that went on until its DDS lease ended (180 s: a run of the two graphs' test above
+    timed out). The graph is held before its start (its environment node gated) until the
+    stand-in has withdrawn; the stand-in's claim publisher stays; the run completes, equal to
+    the core."""
+    withdrawing = subprocess.Popen(
+        [sys.executable, "-c", WITHDRAWING, graph_claim(time.time_ns() + 10**12, "later")],
+        env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    go = tmp_path / "go"
+    try:
+        process = start(ros_env, tmp_path / "out", "--env-node",
+                        f"{sys.executable} {GATED_ENVIRONMENT} {go}")
+        wait_for_line(withdrawing.stdout, "withdrawn", timeout=HANG_S)
+        go.touch()
+        stdout, stderr = process.communicate(timeout=HANG_S)
+    finally:
+        go.touch()
+        withdrawing.send_signal(signal.SIGINT)
+        withdrawing.communicate(timeout=60)
+    assert process.returncode == 0 and "completed" in stdout, stderr[-3000:]
+    assert "a second graph started in namespace / at tick 0: it gives way" in stderr, stderr
+    assert steps_of(tmp_path / "out") == core_steps(TRIALS)
+
+
 def test_claims_order_two_graphs_alike_on_both_sides():
     first, later = graph_claim(1000, "ffff"), graph_claim(1001, "0000")
     assert claim_order(first) < claim_order(later)

@@ -71,10 +71,24 @@ def renamed_environment(publishers: dict[str, list[tuple[str, str]]], namespace:
             f"node by its name (renamed, -r __node:={node}, it is none: docs/ENV_CONTRACT.md)")
 
 
+WITHDRAWN = "withdrawn"
+
+
 def graph_claim(started_ns: int, token: str) -> str:
     """A trial manager's claim to its namespace (graph.names.CLAIM): when it started (ns since
     the epoch) and a random token that tells apart two that started in the same nanosecond."""
     return f"{started_ns} {token}"
+
+
+def withdrawal(claim: str) -> str:
+    """What a trial manager says on CLAIM when its graph is over."""
+    return f"{claim} {WITHDRAWN}"
+
+
+def withdrawn_claim(text: str) -> str | None:
+    """The claim a text on CLAIM withdraws, or None for a text that withdraws none."""
+    claim, _, word = text.rpartition(" ")
+    return claim if word == WITHDRAWN and claim_order(claim) is not None else None
 
 
 def claim_order(claim: str) -> tuple[int, str] | None:
@@ -82,7 +96,8 @@ def claim_order(claim: str) -> tuple[int, str] | None:
     their two claims alike (on two hosts a clock's skew may change which counts as first, never
     that exactly one is). None for a text that is no claim."""
     started, _, token = claim.partition(" ")
-    return (int(started), token) if started.isdigit() and started.isascii() and token else None
+    return (int(started), token) if started.isdigit() and started.isascii() and token and \
+        " " not in token else None
 
 
 def another_graph(namespace: str, seen: str) -> str:

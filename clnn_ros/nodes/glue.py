@@ -26,7 +26,7 @@ from ..graph.lockstep import Refusals, episode_end_problem
 from ..graph.names import CLAIM, READY, SIM_TIME_NODES, TRIAL_EVENT
 from ..graph.run import (DESCRIPTIONS, declared_values, node_parameters, read_params_file,
                          names_list)
-from ..graph.watch import claim_order, graph_claim
+from ..graph.watch import claim_order, graph_claim, withdrawal, withdrawn_claim
 from ..session.rclpy_session import (qos_profile, ros_session, spin_until_finished,
                                       split_ros_arguments)
 from ..session.rosenv import PARTICIPANT_LEASE_S
@@ -215,6 +215,7 @@ class GraphClaim:
         self.claim = graph_claim(time.time_ns(), secrets.token_hex(8))
         self.on_other, self._others, self._log = on_other, set(), node.get_logger()
         self.met_another = False  # another graph's trial manager was here (contested, or heard)
+        self._withdrawn = set()  # other graphs' claims withdrawn: those graphs are over
         self._publisher = node.create_publisher(String, CLAIM, CLAIM_QOS)
         self._publisher.publish(String(data=self.claim))
         self._subscription = node.create_subscription(String, CLAIM, self._receive, CLAIM_QOS)
@@ -226,11 +227,24 @@ class GraphClaim:
         graph that started meanwhile ran mixed with it; and of two graphs started together, the
         one that goes on waits until the other has given way (before, it started while the
         other's nodes were still up, counted their endpoints as its own and stalled at tick 0)."""
-        contested = self._subscription.get_publisher_count() > 1
+        others = self._subscription.get_publisher_count() - 1
+        live = {claim for claim in self._others if claim_order(claim)} - self._withdrawn
+        # withdrawn ones may have left meanwhile: then a claim heard and not withdrawn counts
+        contested = others > len(self._withdrawn) or (others > 0 and bool(live))
         self.met_another |= contested
         return contested
 
+    def withdraw(self) -> None:
+        """Say on CLAIM that this graph is over. Its participant's goodbye to DDS can be lost:
+        its claim publisher then stays matched until its DDS lease ends (180 s), and a graph
+        that waits while another is contesting waited that long for one that had given way."""
+        self._publisher.publish(String(data=withdrawal(self.claim)))
+
     def _receive(self, msg: String) -> None:
+        if (withdrawn := withdrawn_claim(msg.data)) is not None:
+            if withdrawn != self.claim:
+                self._withdrawn.add(withdrawn)
+            return
         if msg.data == self.claim or msg.data in self._others:
             return
         self._others.add(msg.data)  # heard, whatever it says

@@ -80,8 +80,7 @@ class TrialManagerNode(Node):
         self.files = TrialFiles(self.settings["out_dir"], self.settings["seed"],
                                 self.get_logger().error)
         self.clock_msg = Clock()
-        self.final_weights = None
-        self.weights_tick = None
+        self.final_weights = self.weights_tick = None
         self.trial_end_tick = None  # the last tick of the last trial that ended
         self.last_trial_tick = None  # set when the last trial is over
         # a resumed episode (init_weights: a checkpoint) starts at the checkpoint's next trial
@@ -372,6 +371,7 @@ class TrialManagerNode(Node):
         other graph's would obey it too), write the results, finish with `exit_code`."""
         if self.finished.done():
             return
+        self.claim.withdraw()  # this graph is over, whatever its nodes' DDS goodbyes do
         tick = self.join.tick if tick is None else tick
         if exit_code != NOT_STARTED:
             self.event_pub.publish(TrialEvent(
