@@ -129,7 +129,7 @@ MAY_IMPORT = {
     "session": {"core", "graph"},
     "bag": {"graph", "files", "cli"},
     "nodes": {"core", "graph", "session", "bag", "files", "tasks"},
-    "processes": {"core", "graph", "session", "files", "nodes", "tasks"},
+    "processes": {"core", "graph", "session", "files", "bag", "nodes", "tasks"},
     "run_all": {"core", "graph", "session", "processes", "bag", "cli", "files", "tasks"},
     "analysis": {"core", "graph", "bag", "files", "cli", "figures"},
     "check_env": {"core", "graph", "session"},

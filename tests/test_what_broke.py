@@ -31,7 +31,8 @@ from clnn_ros.core.params import Params
 from clnn_ros.graph.names import PER_TICK, STATE
 from clnn_ros.graph.run import RUN_SETTINGS
 from clnn_ros.graph.ticks import TICKS_RECORD, TickRanges
-from clnn_ros.graph.watch import claim_order, graph_claim
+from clnn_ros.graph.watch import (claim_order, describe_foreign, foreign_publishers,
+                                  graph_claim, names_pending, renamed_environment)
 
 from test_graph import processes_with, wait_for_line
 from test_recording import child
@@ -441,6 +442,26 @@ def test_a_graph_that_withdrew_its_claim_holds_no_other(ros_env, tmp_path):
     assert process.returncode == 0 and "completed" in stdout, stderr[-3000:]
     assert "a second graph started in namespace / at tick 0: it gives way" in stderr, stderr
     assert steps_of(tmp_path / "out") == core_steps(TRIALS)
+
+
+def test_the_publishers_of_graph_topics_are_judged_by_their_node_names():
+    """A foreign node is named with every graph topic it publishes on; a renamed environment
+    only where no publisher of its topics is named environment (the node list may lag)."""
+    publishers = {"clock": [("trial_manager", "/"), ("forger", "/")],
+                  "env/observation": [("environment", "/"), ("forger", "/")],
+                  "rln/spikes": [("encoder", "/"), ("forger", "/"), ("other", "/x")],
+                  "env/task": [("environment", "/")]}
+    assert describe_foreign(foreign_publishers(publishers, "/")) == \
+        "a foreign publisher on clock, env/observation, rln/spikes: node 'forger' in namespace /"
+    assert renamed_environment(publishers, "/", environment_present=False) is None
+    renamed = {"env/observation": [("brain", "/")], "env/task": [("brain", "/")]}
+    assert renamed_environment(renamed, "/", environment_present=True) is None
+    assert renamed_environment(renamed, "/", environment_present=False).startswith(
+        "no node named 'environment' in namespace /: node 'brain' (namespace /) publishes "
+        "env/observation, env/task; ")
+    unnamed = {"env/observation": [("_NODE_NAME_UNKNOWN_", "/")]}
+    assert renamed_environment(unnamed, "/", environment_present=False) is None
+    assert names_pending(unnamed) and not names_pending(renamed)
 
 
 def test_claims_order_two_graphs_alike_on_both_sides():

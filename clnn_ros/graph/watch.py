@@ -57,11 +57,11 @@ def renamed_environment(publishers: dict[str, list[tuple[str, str]]], namespace:
     environment node renamed (-r __node:=brain) that ran as the graph's was named a foreign
     publisher after a while, or a short run completed (issue 47); now the start waits for the
     environment by name, and this says why it never comes."""
-    if environment_present:
-        return None
-    strangers = [(topic, node, node_namespace) for topic, endpoints in sorted(publishers.items())
-                 if PUBLISHED_BY[topic] == ENVIRONMENT
-                 for node, node_namespace in endpoints if node != UNKNOWN_NODE]
+    ours = [(topic, node, node_namespace) for topic, endpoints in sorted(publishers.items())
+            if PUBLISHED_BY[topic] == ENVIRONMENT for node, node_namespace in endpoints]
+    if environment_present or any(who == [ENVIRONMENT, namespace] for _, *who in ours):
+        return None  # (the node list may lag behind the endpoints' names)
+    strangers = [found for found in ours if found[1] != UNKNOWN_NODE]
     if not strangers:
         return None
     _, node, node_namespace = strangers[0]

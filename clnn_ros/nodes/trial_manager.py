@@ -90,7 +90,7 @@ class TrialManagerNode(Node):
         self.external_nodes = names_list(self.settings["external_nodes"])
         self.expected = set(GRAPH_NODES) | self.extra_nodes
         self.in_graph = set()  # nodes of the graph seen in the ROS graph
-        self.externals_awaited_since = None
+        self.externals_awaited_since, self.unnamed_s, self.topic_publishers = None, 0.0, {}
         self.last_note = self.last_graph_check = time.monotonic()
         self.running = RunningTime(cap=2 * WATCHDOG_S)
         self.stalled_s = 0.0  # running time of this node without progress
@@ -157,8 +157,7 @@ class TrialManagerNode(Node):
             self.advance(tick, starts_trial)
 
     def on_weights(self, msg: WeightSnapshot) -> None:
-        """The weights after a trial: of the tick being completed (they may come before its
-        action) or of the trial's last tick, once."""
+        """The weights after a trial: of the tick being completed, or of the trial's last tick."""
         if msg.tick != self.join.tick and (msg.tick != self.trial_end_tick or
                                            self.weights_tick == msg.tick):
             self.refusals.refuse(WEIGHTS, msg, f"expected weights of tick {self.trial_end_tick}")
@@ -168,8 +167,7 @@ class TrialManagerNode(Node):
         self.finish_when_weights_arrive()
 
     def finish_when_weights_arrive(self) -> None:
-        """The episode is complete once the agent's weights after the last trial are in (they
-        travel on their own topic, so they may arrive after the last action)."""
+        """Complete once the weights after the last trial are in (they may follow its action)."""
         if self.last_trial_tick is not None and self.weights_tick == self.last_trial_tick:
             self.stop(*((1, f"tainted: {self.tainted}") if self.tainted else (0, COMPLETED)),
                       self.last_trial_tick)  # a tainted run is never reported as completed
@@ -194,8 +192,7 @@ class TrialManagerNode(Node):
             self.stop(1, self.stall_reason())
 
     def graph_problem(self) -> str | None:
-        """Shared names (check_start holds the start; later a taint), a node that left, a renamed
-        environment before the start, a foreign publisher once running."""
+        """Shared names (held before the start, a taint after), a node that left, a forger."""
         namespace = self.get_namespace()
         present = Counter(name for name, ns in self.get_node_names_and_namespaces()
                           if ns == namespace)
@@ -216,11 +213,10 @@ class TrialManagerNode(Node):
         self.in_graph |= {n for n in self.expected if present[n]}
         if left := gone(self.in_graph, present, self.external_nodes):
             return f"node '{left[0]}' left the ROS graph at tick {self.join.tick}"
-        publishers = publishers_by_topic(self, PUBLISHED_BY)
+        self.topic_publishers = publishers = publishers_by_topic(self, PUBLISHED_BY)
         self.look_again = names_pending(publishers)  # a name still to come: look next check
-        if self.started_at is None:  # the start waits for the environment by name; another's
-            # traffic before the first tick judges it (seen): no race of name and message
-            return renamed_environment(publishers, namespace, ENVIRONMENT in self.in_graph)
+        if self.started_at is None:  # before the first tick its traffic judges it (seen): one
+            return None  # outcome, not a race of its name's discovery and its first message
         foreign = foreign_publishers(publishers, namespace)
         if foreign and not self.tainted and describe_foreign(foreign) != self.foreign_seen:
             # its other topics' endpoints may come a moment later: named once it holds still
@@ -246,8 +242,7 @@ class TrialManagerNode(Node):
                                       f"{self.join.tick}: it gives way")
 
     def watch_recorder(self, present: bool) -> None:
-        """Paused past its DDS lease, the recorder drops out of the ROS graph: the graph goes on
-        without it until it is back (the bag lacks those ticks, and run_all says which)."""
+        """A recorder paused past its DDS lease drops out: the graph goes on until it is back."""
         if not present and not self.recorder_out:
             self.recorder_out = True
             self.get_logger().warning(f"the recorder left the ROS graph at tick {self.join.tick} "
@@ -276,10 +271,16 @@ class TrialManagerNode(Node):
         if hold:  # whose announcement? (nodes repeat)
             self.ready.clear()
         missing = self.expected - self.ready
-        if not (missing or hold) and self.matched() and self.task is not None and \
-                self.expected <= self.in_graph:  # each by its name, not only its announcement
-            self.started_at = now
-            self.advance(0, starts_trial=True)
+        if not (missing or hold) and self.matched() and self.task is not None:
+            if self.expected <= self.in_graph:  # each by its name, not only its announcement
+                self.started_at = now
+                self.advance(0, starts_trial=True)
+            else:  # announced, not in the ROS graph by its name (yet): renamed, or a slow name
+                self.unnamed_s += running
+                renamed = renamed_environment(self.topic_publishers, self.get_namespace(),
+                                              ENVIRONMENT in self.in_graph)
+                if renamed and self.unnamed_s > self.settings["stall_timeout_s"]:
+                    self.stop(1, renamed)
             return
         absent = (self.external_nodes & missing) - self.in_graph
         if absent and (self.expected - self.external_nodes) <= self.in_graph:
@@ -310,8 +311,7 @@ class TrialManagerNode(Node):
     # --- the clock ----------------------------------------------------------------------------
 
     def advance(self, tick: int, starts_trial: bool) -> None:
-        """Publish tick `tick` (START first if it starts a trial), unless the recorder is more
-        than RECORDER_WINDOW ticks behind: then hold it until the recorder's progress comes."""
+        """Publish tick `tick` (START first), unless held for a recorder RECORDER_WINDOW behind."""
         if self.follows_recorder and not self.recorder_out and \
                 tick > self.recorded_tick + RECORDER_WINDOW:
             self.held = (tick, starts_trial)
@@ -367,11 +367,11 @@ class TrialManagerNode(Node):
         self.save_results(self.join.tick)
 
     def stop(self, exit_code: int, reason: str, tick: int | None = None) -> None:
-        """End the episode: tell the nodes (run_all or launch stops them if it gives way: the
-        other graph's would obey it too), write the results, finish with `exit_code`."""
+        """End the episode: tell the nodes (not when it gives way: the other graph's would obey
+        it too), withdraw the claim (its DDS goodbye may be lost), write the results, finish."""
         if self.finished.done():
             return
-        self.claim.withdraw()  # this graph is over, whatever its nodes' DDS goodbyes do
+        self.claim.withdraw()
         tick = self.join.tick if tick is None else tick
         if exit_code != NOT_STARTED:
             self.event_pub.publish(TrialEvent(

@@ -284,7 +284,7 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
     """Start the nodes (env_command None: no environment) and watch them until the trial
     manager ends. Returns (its exit status, or 128 + signal; the failure run_all saw itself, or
     None: a process that exited with an error or a signal, or that someone else stopped before
-    the episode ended)."""
+    the episode ended; one seen before a Ctrl-C stays, as what ended the run)."""
     arguments = node_arguments(write_params(workdir / "params.yaml", values), namespace)
     for name in NODES:
         command = env_command if name == "environment" else \
@@ -337,7 +337,7 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
     warn_forced([(name, how) for name, how in forced
                  if how != "terminated" or failure is None])
     status = manager.returncode if status is None else status
-    return (128 + interrupted[0], None) if interrupted else (status, error)
+    return (128 + interrupted[0], None) if interrupted and error is None else (status, error)
 
 
 def unfinished_bag(name: str, bag_path: Path | None) -> str:
