@@ -563,7 +563,8 @@ def test_of_two_graphs_started_at_once_one_gives_way_and_the_other_is_never_wron
     # its recording line is answered (issue 47: the bag it named vanished without a word)
     assert "run_all: bag" not in ended[gave_way[0]][0]
     assert f"run_all: removed the bag {tmp_path / gave_way[0] / 'bag'}: it held another " \
-           f"graph's messages" in ended[gave_way[0]][0], ended[gave_way[0]][0]
+           f"graph's messages" in ended[gave_way[0]][0] or "run_all: nothing recorded, no bag" \
+           in ended[gave_way[0]][0], ended[gave_way[0]][0]  # the recorder removed an empty one
     core = run_episode(seeds[other], Params(trials=TRIALS, max_steps=MAX_STEPS)).steps.tolist()
     if runs[other].returncode == 0:
         assert "completed" in stdout and steps_of(tmp_path / other) == core
