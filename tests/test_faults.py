@@ -183,29 +183,22 @@ def test_silent_node_is_named_after_the_stall_timeout(ros_env, tmp_path):
     assert not processes_with(str(tmp_path))
 
 
-def test_a_wrong_tick_is_blamed_on_its_sender(ros_env, tmp_path):
-    """The environment publishes the observation of tick 2 as tick 3: every receiver refuses it, and
-    the environment (not the encoder downstream) is named."""
+@pytest.mark.parametrize("bug, refused", [
+    ("wrong_tick", "tick 3: expected tick 2"),
+    ("extra_value", "tick 2: 5 values, the task cartpole has 4 variables (cart_position, "
+                    "cart_velocity, pole_angle, pole_angular_velocity)"),
+])
+def test_a_bad_observation_is_blamed_on_its_sender(ros_env, tmp_path, bug, refused):
+    """The environment publishes the observation of tick 2 as tick 3, or with one value more
+    than its task's variables: every receiver refuses it (the encoder and the trial manager each
+    read the task), and the environment (not the encoder downstream) is named."""
     process = start_run(ros_env, tmp_path, "--stall-timeout", "1",
-                        "--env-node", f"python {BROKEN} wrong_tick")
+                        "--env-node", f"python {BROKEN} {bug}")
     _, stderr = process.communicate(timeout=HANG_S)
     assert process.returncode == 1
     assert problem_lines(stderr) == [
-        "run_all: error: stall: node 'environment' went silent at tick 2 (no progress for 1 s; "
-        "last refused env/observation: tick 3: expected tick 2)"], stderr[-3000:]
-
-
-def test_an_observation_that_does_not_fit_the_task_is_blamed_on_its_sender(ros_env, tmp_path):
-    """One value more than the task's variables: the encoder and the trial manager refuse it
-    (each reads the task), and the environment is named, not the encoder that then waits."""
-    process = start_run(ros_env, tmp_path, "--stall-timeout", "1",
-                        "--env-node", f"python {BROKEN} extra_value")
-    _, stderr = process.communicate(timeout=HANG_S)
-    assert process.returncode == 1
-    assert problem_lines(stderr) == [
-        "run_all: error: stall: node 'environment' went silent at tick 2 (no progress for 1 s; "
-        "last refused env/observation: tick 2: 5 values, the task cartpole has 4 variables "
-        "(cart_position, cart_velocity, pole_angle, pole_angular_velocity))"], stderr[-3000:]
+        f"run_all: error: stall: node 'environment' went silent at tick 2 (no progress for 1 s; "
+        f"last refused env/observation: {refused})"], stderr[-3000:]
 
 
 @pytest.mark.parametrize("trials", [3, 20])
