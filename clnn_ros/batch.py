@@ -297,20 +297,21 @@ def _run_many(weights, starts, constants, force, components, edges, offsets, max
               _scratch(n_patterns, n_neurons, n_segments, n_inputs, n_vars))
 
 
-def _drop_stale_cache() -> None:
+def drop_stale_cache(dispatchers, stamp_name: str, modules=()) -> None:
     """Numba's disk cache checks only the file of each cached function, not the core files whose
     functions are compiled into it (a documented limitation, numba/numba#1833): after a change
-    to one of those, the cached engine would run the old rule. A digest of them beside the
-    cache drops it then (through the dispatchers' cache objects: numba has no public call)."""
+    to one of those, the cached engine would run the old rule. A digest of them (and of
+    `modules`, other files compiled in) beside the cache, in `stamp_name`, drops the cache of
+    `dispatchers` then (through their cache objects: numba has no public call)."""
     # params: the option indices (TIE_BREAKS) are compiled in as constants
-    core = (rln, rule_values, physics, encoder, random_stream, params, jitable)
+    core = (rln, rule_values, physics, encoder, random_stream, params, jitable, *modules)
     core_sources = b"".join(Path(m.__file__).read_bytes() for m in core)
     digest = hashlib.sha256(core_sources).hexdigest()
-    stamp = Path(_run_many._cache._cache_path) / "batch.core_sources.sha256"
+    stamp = Path(dispatchers[0]._cache._cache_path) / stamp_name
     try:
         if stamp.exists() and stamp.read_text() == digest:
             return
-        for dispatcher in (_run_many, _scratch, _work, _tick, *vars(COMPILED_KERNELS).values()):
+        for dispatcher in dispatchers:
             dispatcher._cache.flush()
         stamp.parent.mkdir(parents=True, exist_ok=True)
         stamp.write_text(digest)
@@ -318,7 +319,8 @@ def _drop_stale_cache() -> None:
         pass
 
 
-_drop_stale_cache()
+drop_stale_cache((_run_many, _scratch, _work, _tick, *vars(COMPILED_KERNELS).values()),
+                 "batch.core_sources.sha256")
 
 
 @dataclass

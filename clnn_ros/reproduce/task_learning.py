@@ -1,7 +1,7 @@
 """Learning any task but the cart-pole (`clnn-reproduce learn --task gymnasium:ID`): each seed's
 episode with the core (core.task_episode, its rule's costly functions compiled by the batch
-engine: the same results) in the task's own environment, the seeds shared out to worker
-processes. Judged as the field judges the task: solved at the first episode whose last 100
+engine: the same results) in the task's own environment, or all compiled where the task's step
+is (clnn_ros.task_batch: the same results), the seeds shared out to worker processes. Judged as the field judges the task: solved at the first episode whose last 100
 returns average its threshold or more."""
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from ..core.params import Params
 from ..core.solving import WINDOW, solved_episode
 from ..core.task import Task
 from ..core.task_episode import TaskEpisodeResult, run_task_episode
+from ..task_batch import compiles, run_compiled_task_episode
 from ..tasks.gymnasium_task import env_id, make, task_params
 from ..figures import plot_task_returns
 from .common import load_stored, md_table, progress, store_arrays, store_path, write_csv
@@ -64,9 +65,11 @@ def run_task_jobs(task_name: str, actions: str | None, jobs: list[tuple[Params, 
 
 
 def task_seed(task_name: str, actions: str | None, p: Params, seed: int) -> dict:
-    """One seed's episode of the task (in a worker process), as arrays."""
+    """One seed's episode of the task (in a worker process), as arrays: all compiled where the
+    task's step is (clnn_ros.task_batch), else Gymnasium's step with the rule compiled."""
     task, env = make(task_name, actions)
-    result = run_task_episode(seed, p, task, env, kernels=COMPILED_KERNELS)
+    result = run_compiled_task_episode(seed, p, task, env) if compiles(task) else \
+        run_task_episode(seed, p, task, env, kernels=COMPILED_KERNELS)
     return dict(steps=result.steps, returns=result.returns, terminated=result.terminated,
                 final_weights=result.final_weights)
 
