@@ -33,7 +33,7 @@ from . import bag
 from .cli import OneLineArgumentParser
 from .core.checkpoint import Checkpoint, load_checkpoint
 from .core.params import CARTPOLE, PROTOCOLS, STATE_NAMES, ParamError, Params
-from .core.presets import PRESETS
+from .core.presets import PRESETS, check_preset_task
 from .files import cannot_create
 from .graph.names import NOT_STARTED, RECORDER, TRIAL_MANAGER, namespace_problem
 from .graph.run import (DEMO, ENVIRONMENTS, OWN_TAU, RUN_SETTINGS, SIMULATORS, default_bag_path,
@@ -205,6 +205,8 @@ def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
             str(Path(args.init_weights).resolve())
     defaults = gymnasium_task.graph_defaults(
         args.env, DEMO if checkpoint is None else checkpoint_values(checkpoint), args.actions)
+    if args.preset is not None and args.env_node is None and args.env != "external":
+        check_preset_task(args.preset, args.env if args.env.startswith(PREFIX) else CARTPOLE)
     if args.env_node is None and args.env in SIMULATORS:
         flags["simulator"] = args.env
     values, params = run_values(defaults, args.preset, args.params_file, options, flags)

@@ -55,6 +55,28 @@ def test_a_gymnasium_task_in_the_graph_equals_the_core(ros_env, tmp_path, task_n
     np.testing.assert_array_equal(np.load(tmp_path / "final_weights.npy"), core.final_weights)
 
 
+def test_a_tasks_preset_in_the_graph_equals_the_task_batch_engine(ros_env, tmp_path):
+    """`clnn-run --env gymnasium:Acrobot-v1 --preset acrobot_v1` runs what `learn --task
+    gymnasium:Acrobot-v1 --preset acrobot_v1` runs (clnn_ros.task_batch)."""
+    from clnn_ros.core.presets import preset_values
+    from clnn_ros.task_batch import run_compiled_task_episode
+
+    trials, seed = 4, 3
+    result = run_all(ros_env, "--env", "gymnasium:Acrobot-v1", "--preset", "acrobot_v1",
+                     "--seed", str(seed), "--trials", str(trials), "--no-record", "--out",
+                     str(tmp_path))
+    assert result.returncode == 0, result.stderr
+    assert ", preset acrobot_v1" in result.stdout
+    task, env = make("gymnasium:Acrobot-v1")
+    p = task_params(task, {**preset_values("acrobot_v1"), "trials": str(trials)})
+    batch = run_compiled_task_episode(seed, p, task, env)
+    assert batch.terminated.any()  # it reached the line within these trials
+    with open(tmp_path / "trials.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [int(r["steps"]) for r in rows] == (batch.steps - batch.terminated).tolist()
+    np.testing.assert_array_equal(np.load(tmp_path / "final_weights.npy"), batch.final_weights)
+
+
 def test_a_task_without_its_environment_is_refused_in_one_line(ros_env):
     result = run_all(ros_env, "--option", "task=gymnasium:Acrobot-v1", "--trials", "1")
     assert result.returncode == 2 and result.stdout == ""

@@ -4,6 +4,8 @@ for bit."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -71,3 +73,33 @@ def test_the_task_batch_engine_is_the_cores_episode_bit_for_bit(name, changes):
 
 def test_only_the_compiled_steps_compile():
     assert not compiles(make("gymnasium:CartPole-v1")[0])
+
+
+def test_learn_a_task_with_its_preset(tmp_path, capsys):
+    """`learn --task ID --preset NAME`: the preset's values over the task's, an option over
+    them; the seeds' episodes are the core's (the engine's, shown equal above)."""
+    from clnn_ros.core.presets import preset_values
+    from clnn_ros.reproduce.__main__ import main
+
+    assert main(["learn", "--task", "gymnasium:Acrobot-v1", "--preset", "acrobot_v1",
+                 "--option", "sigma=32", "--seeds", "3", "--trials", "5", "--workers", "1",
+                 "--out", str(tmp_path)]) == 0
+    with np.load(tmp_path / "final_weights_Acrobot-v1.npz") as saved:
+        task, env = make("gymnasium:Acrobot-v1")
+        p = task_params(task, {**preset_values("acrobot_v1"), "sigma": "32", "trials": "5"})
+        assert json.loads(str(saved["params"])) == json.loads(json.dumps(p.to_dict()))
+        assert p.state_vars == ("theta1_dot",) and p.omega == 100 and p.sigma == 32
+        core = run_task_episode(3, p, task, env)
+        assert saved["steps"][0].tolist() == core.steps.tolist()
+        np.testing.assert_array_equal(saved["final_weights"][0], core.final_weights)
+
+
+def test_run_all_refuses_another_tasks_preset_in_one_line():
+    from clnn_ros import run_all
+
+    for argv, other in ((["--preset", "acrobot_v1"], "the cart-pole"),
+                        (["--env", "gymnasium:MountainCar-v0", "--preset", "acrobot_v1"],
+                         "gymnasium:MountainCar-v0")):
+        with pytest.raises(ValueError, match=f"preset acrobot_v1 is for --task "
+                                             f"gymnasium:Acrobot-v1 .*, not {other}$"):
+            run_all.build_parameters(run_all.parse_args([*argv, "--no-record"]))

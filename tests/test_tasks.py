@@ -240,7 +240,12 @@ def test_learn_a_gymnasium_task_from_the_command_line(tmp_path, capsys):
 
 @pytest.mark.parametrize("argv, message", [
     (["--task", "gymnasium:Acrobot-v1", "--physics", "correct"], "--physics is for the cart-pole"),
-    (["--task", "gymnasium:Acrobot-v1", "--preset", "escape"], "--preset is for the cart-pole"),
+    (["--task", "gymnasium:Acrobot-v1", "--preset", "escape"],
+     "preset escape is for the cart-pole, not gymnasium:Acrobot-v1"),
+    (["--task", "gymnasium:MountainCar-v0", "--preset", "acrobot_v1"],
+     "preset acrobot_v1 is for --task gymnasium:Acrobot-v1 (clnn-run --env gymnasium:Acrobot-v1), "
+     "not gymnasium:MountainCar-v0"),
+    (["--preset", "acrobot_v1"], "preset acrobot_v1 is for --task gymnasium:Acrobot-v1"),
     (["--actions=-1,1"], "--actions goes with --task gymnasium:ID"),
     (["--task", "Acrobot"], "a Gymnasium task is named gymnasium:ID"),
     (["--task", "gymnasium:Acrobot-v1", "--option", "n_actions=2"], "has 3 actions"),

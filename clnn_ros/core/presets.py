@@ -2,7 +2,10 @@
 options override (`clnn-reproduce learn --preset NAME`, `sweep --preset`, `clnn-run --preset`;
 `clnn-reproduce presets` lists them).
 
-Each value is text, as params_from_strings takes it from the command line.
+Each value is text, as params_from_strings takes it from the command line. A preset is for one
+task: the paper's cart-pole and its variants where it names none, else the task its `task`
+value names (`learn --task gymnasium:Acrobot-v1 --preset acrobot_v1`, `clnn-run --env
+gymnasium:Acrobot-v1 --preset acrobot_v1`).
 """
 
 from __future__ import annotations
@@ -10,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .gym_physics import GYM_PHYSICS
-from .params import ParamError
+from .params import CARTPOLE, ParamError
 
 
 @dataclass(frozen=True)
@@ -45,6 +48,13 @@ PRESETS = {
         "the paper's physics and encoding; out of its local optima with 12 segments per neuron, "
         "twice Table 2's punishment and no reward backoff (rho_minus 0)",
         {"segments": "12", "punish": "0.015625", "rho_minus": "0"}),
+    # Chosen on the selection seeds 128-255 by scripts/task_search.py (docs/TASKS.md)
+    "acrobot_v1": Preset(
+        "Gymnasium's Acrobot-v1: the first link's angular velocity alone encoded (one edge, "
+        "0 rad/s: two inputs), a punishment every 100 steps without reaching the line, a reward "
+        "on reaching it for the 128 steps before",
+        {"task": "gymnasium:Acrobot-v1", "state_vars": "theta1_dot",
+         "variable_edges": "theta1_dot:0", "omega": "100", "sigma": "128"}),
 }
 
 
@@ -53,6 +63,20 @@ def preset_values(name: str) -> dict[str, str]:
     if name not in PRESETS:
         raise ParamError(f"unknown preset {name!r}; known: {', '.join(PRESETS)}")
     return dict(PRESETS[name].values)
+
+
+def preset_task(name: str) -> str:
+    """The task a preset is for (ParamError for an unknown name)."""
+    return preset_values(name).get("task", CARTPOLE)
+
+
+def check_preset_task(name: str, task_name: str) -> None:
+    """ParamError with one line where the preset is for a task other than `task_name`."""
+    own = preset_task(name)
+    if own != task_name:
+        where = "the cart-pole" if own == CARTPOLE else f"--task {own} (clnn-run --env {own})"
+        other = "the cart-pole" if task_name == CARTPOLE else task_name
+        raise ParamError(f"preset {name} is for {where}, not {other}")
 
 
 def overlay_values(values: dict, changes: dict) -> dict:

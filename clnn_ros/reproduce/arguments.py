@@ -7,7 +7,7 @@ import argparse
 
 from ..core.params import (CARTPOLE, PROTOCOLS, STATE_NAMES, Params, params_from_strings,
                            protocol_defaults)
-from ..core.presets import PRESETS, overlay_values, preset_values
+from ..core.presets import PRESETS, check_preset_task, overlay_values, preset_values
 from .common import DEFAULT_SEEDS, LITERAL_EDGE, TRIALS
 
 PRESET_HELP = ("a named set of parameter values (" + ", ".join(PRESETS) + "; the command "
@@ -60,6 +60,7 @@ def learn_params(args) -> Params:
     flags and --options on top."""
     values = {"trials": str(TRIALS)}
     if args.preset is not None:
+        check_preset_task(args.preset, CARTPOLE)
         values = overlay_values(values, preset_values(args.preset))
     return params_from_strings(protocol_defaults(overlay_values(values, given_values(args))))
 
@@ -79,12 +80,16 @@ def add_task_flags(parser: argparse.ArgumentParser) -> None:
 
 def task_values(args) -> dict[str, str]:
     """The Params values (text) of `learn` or `sweep --task` for a task other than the
-    cart-pole; the flags for the cart-pole alone are refused in one line."""
+    cart-pole: the task's preset, then the command's values; the flags for the cart-pole alone,
+    and another task's preset, are refused in one line."""
     refused = [OWN_FLAGS[name] for name in CARTPOLE_FLAGS if getattr(args, name) is not None]
-    refused += [flag for flag, value in (("--preset", args.preset), ("--ray", args.ray))
-                if value is not None]
+    refused += ["--ray"] if args.ray is not None else []
     if args.workers is not None and args.workers < 1:
         raise ValueError(f"--workers must be at least 1, got {args.workers}")
     if refused:
         raise ValueError(f"{refused[0]} is for the cart-pole, not --task {args.task}")
-    return {"trials": str(TRIALS), **given_values(args)}
+    values = {"trials": str(TRIALS)}
+    if args.preset is not None:
+        check_preset_task(args.preset, args.task)
+        values.update(preset_values(args.preset))
+    return {**values, **given_values(args)}
