@@ -99,15 +99,17 @@ def compiles(task: Task) -> bool:
 
 
 def run_compiled_task_episode(seed: int, p: Params, task: Task, env: GymnasiumEnvironment,
-                              learn: bool = True) -> TaskEpisodeResult:
-    """core.task_episode.run_task_episode(seed, p, task, env, learn), compiled: the same
-    result. `env` (gymnasium_task.make's, of a task that compiles) gives the trials' starts."""
+                              learn: bool = True,
+                              weights: np.ndarray | None = None) -> TaskEpisodeResult:
+    """core.task_episode.run_task_episode(seed, p, task, env, learn, weights), compiled: the
+    same result. `env` (gymnasium_task.make's, of a task that compiles) gives the trials'
+    starts."""
     task.check(p)
     starts = []
     for trial in range(p.trials):
         env.reset(STARTS_SEED + seed if trial == 0 else None)
         starts.append(classic_control.start_state(env.env))
-    weights = seed_setup(seed, p)[0].copy()
+    weights = (seed_setup(seed, p)[0] if weights is None else weights).astype(np.float64)
     steps = np.zeros(p.trials, dtype=np.int64)
     returns = np.zeros(p.trials, dtype=np.float64)
     terminated = np.zeros(p.trials, dtype=bool)

@@ -43,12 +43,15 @@ SPACES = {
                            "position:-0.9,-0.5,-0.2;velocity:0",
                            "position:-0.9,-0.5,-0.2;velocity:-0.005,0,0.005",
                            "position:-1.0,-0.7,-0.5,-0.3,0;velocity:0",
+                           "position:-0.9,-0.7,-0.5,-0.3,-0.1,0.1,0.3;velocity:0",
                            "position:-0.9,-0.6,-0.3,0,0.3;velocity:-0.01,0,0.01"],
         "omega": ["100", "110", "120", "130", "150"],
         "sigma": ["64", "128", "200"],
         "punish": ["0.0078125", "0.03125"],
         "rho_minus": ["0.00390625", "0.0625"],
         "segments": ["", "4", "16"],
+        "explore": ["0", "0.01", "0.05"],
+        "tagging": ["winner", "both_neurons"],
     },
 }
 SELECTION = range(128, 256)

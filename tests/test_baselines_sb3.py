@@ -32,3 +32,15 @@ def test_a_longer_dqn_budget_keeps_its_exploration_schedule_in_steps():
     assert arguments["exploration_fraction"] * n_timesteps == pytest.approx(8_000)
     with pytest.raises(ValueError, match="lin_ schedules"):
         model_arguments(zoo_entry("ppo")[0], budget_factor=4)
+
+
+def test_a_tasks_entry_is_rl_zoo3s_own_and_normalize_is_trains():
+    """Acrobot-v1's PPO entry normalizes (train() wraps VecNormalize, not the model's argument);
+    the MuJoCo tasks take rl-zoo3's v2 entries; DQN has none for a continuous action space."""
+    entry = zoo_entry("ppo", "Acrobot-v1")[0]
+    arguments, n_envs, n_timesteps = model_arguments(entry)
+    assert entry["normalize"] and "normalize" not in arguments
+    assert (n_envs, n_timesteps, arguments["n_steps"]) == (16, 1_000_000, 256)
+    assert zoo_entry("ppo", "InvertedPendulum-v5")[0]["n_steps"] == 32
+    assert zoo_entry("ppo", "InvertedDoublePendulum-v5")[0]["batch_size"] == 512
+    assert zoo_entry("dqn", "InvertedPendulum-v5") is None

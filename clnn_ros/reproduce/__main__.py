@@ -56,6 +56,7 @@ from .sensitivity import (SENSITIVITY_SEEDS, check_sweep_names, parse_grid,
 from .goals import REPORT_SEEDS, SELECT_SEEDS as GOAL_SELECT_SEEDS, PLAY_EPISODES, goals_study, \
     goals_markdown, plot_curves, write_goals
 from .report import claims_markdown, data_files_markdown, header_markdown, write_report
+from . import task_versus
 from .versus import AGENTS, DEEP, FIRST_SEEDS, check_agents, run_versus, write_versus
 
 LOCAL_RAY = "local"  # --ray without an address: a Ray instance of this machine's own
@@ -214,16 +215,40 @@ def run_all(args) -> None:
 
 def cmd_versus(args) -> None:
     seeds = parse_seeds(args.seeds)
-    agents = [a.strip() for a in args.agents.split(",") if a.strip()]
-    check_agents(agents, args.stored_only)
+    agents = [a.strip() for a in (args.agents or ",".join(
+        AGENTS if args.task is None else task_versus.AGENTS)).split(",") if a.strip()]
     if args.workers < 1:
         raise ValueError(f"--workers must be at least 1, got {args.workers}")
     out = Path(args.out)
+    if args.task is not None:
+        return versus_task(args, agents, seeds, out)
+    check_agents(agents, args.stored_only)
     began = time.perf_counter()
     results = run_versus(agents, seeds, out / "data" / "versus", args.workers, args.stored_only)
     if not any(results.values()):
         raise ValueError(f"--stored-only: no agent-seed of these stored in {out / 'data'}")
     path = write_versus(results, seeds, args.seeds, out, time.perf_counter() - began)
+    print(path.read_text())
+    print(f"wrote {path}")
+
+
+def versus_task(args, agents: list[str], seeds: list[int], out: Path) -> None:
+    """versus --task: the task's agent-seeds run (or stored), then the report of every task
+    stored so far."""
+    identifier = task_versus.task_id(args.task)
+    task_versus.check_agents(agents, args.stored_only)
+    store = out / "data" / "versus_tasks"
+    by_task = {}
+    for other in task_versus.TASKS:
+        mine = other == identifier
+        results = task_versus.run_task_versus(
+            other, agents if mine else list(task_versus.AGENTS), seeds, args.deep_seeds, store,
+            args.workers, args.stored_only or not mine)
+        if any(results.values()):
+            by_task[other] = results
+    if identifier not in by_task:
+        raise ValueError(f"--stored-only: no agent-seed of {identifier} stored in {store}")
+    path = task_versus.write_task_versus(by_task, out)
     print(path.read_text())
     print(f"wrote {path}")
 
@@ -308,9 +333,15 @@ def build_parser() -> argparse.ArgumentParser:
     vs.add_argument("--seeds", default=REPORT_SEEDS,
                     help="seeds, every agent the same (" + "; ".join(
                         f"{agent}: the first {n}" for agent, n in FIRST_SEEDS.items()) + ")")
-    vs.add_argument("--agents", default=",".join(AGENTS),
+    vs.add_argument("--agents",
                     help=f"comma-separated, of: {', '.join(AGENTS)} ({', '.join(DEEP)} "
-                         "need pip install -e '.[baselines]')")
+                         "need pip install -e '.[baselines]'); with --task, of rln, ppo, dqn "
+                         "(default: all)")
+    vs.add_argument("--task", metavar="gymnasium:ID",
+                    help="another of the field's tasks instead of CartPole-v1: " + ", ".join(
+                        task_versus.TASKS) + " (the report: OUT/VERSUS_TASKS.md)")
+    vs.add_argument("--deep-seeds", type=int, default=8,
+                    help="with --task: PPO and DQN on the first this many seeds (default 8)")
     vs.add_argument("--out", default="docs", help="folder for VERSUS.md, figures/ and data/ "
                                                   "(finished agent-seeds are kept in "
                                                   "data/versus/)")

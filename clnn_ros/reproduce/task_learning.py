@@ -65,13 +65,21 @@ def run_task_jobs(task_name: str, actions: str | None, jobs: list[tuple[Params, 
 
 
 def task_seed(task_name: str, actions: str | None, p: Params, seed: int) -> dict:
-    """One seed's episode of the task (in a worker process), as arrays: all compiled where the
-    task's step is (clnn_ros.task_batch), else Gymnasium's step with the rule compiled."""
+    """One seed's episode of the task (in a worker process), as arrays."""
     task, env = make(task_name, actions)
-    result = run_compiled_task_episode(seed, p, task, env) if compiles(task) else \
-        run_task_episode(seed, p, task, env, kernels=COMPILED_KERNELS)
+    result = task_episode(seed, p, task, env)
     return dict(steps=result.steps, returns=result.returns, terminated=result.terminated,
                 final_weights=result.final_weights)
+
+
+def task_episode(seed: int, p: Params, task: Task, env, learn: bool = True,
+                 weights: np.ndarray | None = None) -> TaskEpisodeResult:
+    """core.task_episode.run_task_episode, the fastest way: all compiled where the task's step
+    is (clnn_ros.task_batch), else Gymnasium's step with the rule compiled (the same
+    results)."""
+    if compiles(task):
+        return run_compiled_task_episode(seed, p, task, env, learn, weights)
+    return run_task_episode(seed, p, task, env, learn, weights, kernels=COMPILED_KERNELS)
 
 
 def write_task_outputs(run: TaskRun, out: Path) -> list[Path]:

@@ -102,7 +102,7 @@ def one_seed(agent: str, seed: int) -> dict:
     algorithm, budget_factor = DEEP[agent]
     run = train_deep(algorithm, seed, budget_factor)
     return dict(returns=run.returns, env_steps=run.env_steps, cpu_s=run.cpu_s,
-                play=frozen_play(run.action, seed))
+                play=frozen_play(lambda observation: int(run.action(observation)), seed))
 
 
 def agent_key(agent: str) -> list | None:
@@ -170,11 +170,11 @@ def run_versus(agents: list[str], seeds: list[int], store: Path, workers: int,
     return results
 
 
-def seed_measures(arrays: dict) -> dict:
+def seed_measures(arrays: dict, threshold: float = SOLVED_MEAN) -> dict:
     """One agent-seed's measures: the episode it solved at (None) and the environment steps by
     then, its episodes and steps in all, CPU seconds, frozen play's mean return."""
     returns, env_steps = arrays["returns"], arrays["env_steps"]
-    solved = solved_episode(returns)
+    solved = solved_episode(returns, threshold)
     return dict(solved=solved, steps=None if solved is None else int(env_steps[solved - 1]),
                 episodes=len(returns), env_steps=int(env_steps[-1]) if len(env_steps) else 0,
                 cpu_s=float(arrays["cpu_s"]),
@@ -204,10 +204,11 @@ def agent_row(agent: str, seeds: dict) -> tuple[list, dict]:
     return row, summary
 
 
-def plot_returns(results: dict, path: Path) -> Path:
+def plot_returns(results: dict, path: Path, title: str = "CartPole-v1",
+                 threshold: float = SOLVED_MEAN, labels: dict = AGENTS) -> Path:
     """Return against environment steps: per agent, the median and quartiles over seeds of the
     mean of each seed's last 10 returns at each step (a seed that stopped, solved, keeps its
-    last value)."""
+    last value); the task's threshold."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -225,12 +226,12 @@ def plot_returns(results: dict, path: Path) -> Path:
         if not curves:
             continue
         q1, q2, q3 = np.nanpercentile(np.array(curves), (25, 50, 75), axis=0)
-        line, = ax.plot(grid, q2, label=AGENTS[agent])
+        line, = ax.plot(grid, q2, label=labels[agent])
         ax.fill_between(grid, q1, q3, color=line.get_color(), alpha=0.2)
-    ax.axhline(SOLVED_MEAN, color="grey", linestyle=":", linewidth=1)
+    ax.axhline(threshold, color="grey", linestyle=":", linewidth=1)
     ax.set_xlabel("environment steps")
     ax.set_ylabel("return (mean of the last 10 episodes)")
-    ax.set_title("CartPole-v1: median and quartiles over seeds")
+    ax.set_title(f"{title}: median and quartiles over seeds")
     ax.legend(fontsize=7)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
