@@ -55,6 +55,14 @@ PRESETS = {
         "on reaching it for the 128 steps before",
         {"task": "gymnasium:Acrobot-v1", "state_vars": "theta1_dot",
          "variable_edges": "theta1_dot:0", "omega": "100", "sigma": "128"}),
+    "mountain_car_v0": Preset(
+        "Gymnasium's MountainCar-v0, the search's best, which does NOT solve it (6 of 128 "
+        "selection seeds): position (-0.9, -0.5, -0.2 m) and velocity (-0.005, 0, 0.005 m/s) "
+        "encoded, a punishment every 120 steps without the flag, a reward on reaching it for "
+        "the 128 steps before, rho_minus 1/256",
+        {"task": "gymnasium:MountainCar-v0", "state_vars": "position,velocity",
+         "variable_edges": "position:-0.9,-0.5,-0.2;velocity:-0.005,0,0.005", "omega": "120",
+         "sigma": "128", "rho_minus": "0.00390625"}),
 }
 
 

@@ -40,7 +40,7 @@ class TaskSetup:
 
 TASKS = {
     "Acrobot-v1": TaskSetup(500, "acrobot_v1"),
-    "MountainCar-v0": TaskSetup(1000),
+    "MountainCar-v0": TaskSetup(1000, "mountain_car_v0"),
     "LunarLander-v3": TaskSetup(1000),
     "InvertedPendulum-v5": TaskSetup(1000, actions="-1,1"),
     "InvertedDoublePendulum-v5": TaskSetup(1000, actions="-1,0,1"),
