@@ -1,8 +1,9 @@
 """Learning any task but the cart-pole (`clnn-reproduce learn --task gymnasium:ID`): each seed's
 episode with the core (core.task_episode, its rule's costly functions compiled by the batch
 engine: the same results) in the task's own environment, or all compiled where the task's step
-is (clnn_ros.task_batch: the same results), the seeds shared out to worker processes. Judged as the field judges the task: solved at the first episode whose last 100
-returns average its threshold or more."""
+is (clnn_ros.task_batch: the same results), the seeds shared out to worker processes. Judged as
+the field judges the task: solved at the first episode whose last 100 returns average its
+threshold or more."""
 
 from __future__ import annotations
 
