@@ -43,6 +43,7 @@ bug).
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import json
 import random
 import sys
@@ -68,6 +69,7 @@ from fuzz_messages import (IGNORED, STALE_FROM, TYPES, MessageMaker, clock_tick,
 
 NODE_NAME = "fuzz_graph"
 STARTUP_TIMEOUT_S = 60.0
+EXIT_HANG_S = 60.0
 ACK_TIMEOUT_S = 10.0
 # After the fuzz it stays until the episode ends (the graph silent this long: gone), so that the
 # trial manager names it: it looks at the ROS graph every 0.5 s and names a publisher only once
@@ -234,8 +236,16 @@ def main(argv: list[str] | None = None) -> int:
                     f.write(text)
             else:
                 print(text)
+            # Once (a suite run beside other work), the fuzzer wrote its report and then did not
+            # exit within 180 s. Should the way out hang again, every thread's stack is printed
+            # and the process ends (exit 1) instead of holding the test until its timeout.
+            faulthandler.dump_traceback_later(EXIT_HANG_S, exit=True)
             return 0
         finally:
+            # rclpy's order: the executor shut down (it lets go of the node's entities, whose
+            # DDS callbacks it had registered) before the node is destroyed, then rclpy itself
+            # (ros_session); the executor used to outlive both.
+            executor.shutdown()
             fuzzer.destroy_node()
 
 
