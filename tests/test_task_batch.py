@@ -4,7 +4,10 @@ for bit."""
 
 from __future__ import annotations
 
+import importlib.util
 import json
+import random
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -103,3 +106,22 @@ def test_run_all_refuses_another_tasks_preset_in_one_line():
         with pytest.raises(ValueError, match=f"preset acrobot_v1 is for --task "
                                              f"gymnasium:Acrobot-v1 .*, not {other}$"):
             run_all.build_parameters(run_all.parse_args([*argv, "--no-record"]))
+
+
+def test_the_preset_search_draws_distinct_candidates_and_ranks_solving_first():
+    """scripts/task_search.py: a fixed draw of distinct candidates of each task's space (all of
+    them valid Params for the task), ranked by seeds solved, then fewer steps to solve."""
+    path = Path(__file__).parents[1] / "scripts" / "task_search.py"
+    spec = importlib.util.spec_from_file_location("task_search", path)
+    search = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(search)
+    for task_name, space in search.SPACES.items():
+        drawn = search.candidates(space, 12, random.Random(46))
+        assert len(drawn) == 12 and all(drawn.count(c) == 1 for c in drawn)
+        assert drawn == search.candidates(space, 12, random.Random(46))
+        task, _ = make(task_name)
+        for candidate in drawn:
+            task_params(task, {k: v for k, v in candidate.items() if v})
+    rows = [[8, 3, "200", "30000", "-150.0", "-120.0"], [8, 5, "300", "40000", "-140.0", "-110.0"],
+            [8, 5, "250", "35000", "-130.0", "-105.0"], [8, 0, "-", "-", "-100.0", "-90.0"]]
+    assert sorted(range(4), key=lambda k: search.rank(rows[k])) == [2, 1, 0, 3]
