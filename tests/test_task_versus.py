@@ -14,7 +14,9 @@ from clnn_ros.core.presets import preset_values
 from clnn_ros.core.solving import solved_episode
 from clnn_ros.core.task_episode import run_task_episode
 from clnn_ros.reproduce.__main__ import main
-from clnn_ros.reproduce.task_versus import PLAY_EPISODES, TASKS
+from clnn_ros.reproduce.common import store_arrays
+from clnn_ros.reproduce.task_versus import PLAY_EPISODES, TASKS, agent_key
+from clnn_ros.reproduce.versus import stored_seed
 from clnn_ros.tasks.gymnasium_task import make, task_params
 
 
@@ -45,6 +47,25 @@ def test_versus_a_task_runs_the_rln_agent_and_reports_it(tmp_path, capsys):
     assert main([*argv[:-2], "--stored-only", "--out", str(tmp_path)]) == 0  # runs nothing
     assert [path.stat().st_mtime_ns for path in stored] == mtimes
     assert (tmp_path / "VERSUS_TASKS.md").read_text() == report
+
+
+def test_a_run_of_one_agent_keeps_the_others_stored_in_the_report(tmp_path, capsys):
+    """A later `--agents rln` must not drop PPO's stored seeds from the report (it did: the
+    report held the agents of the last command alone)."""
+    store = tmp_path / "data" / "versus_tasks" / "Acrobot-v1" / "ppo"
+    ppo = dict(returns=np.full(150, -90.0), env_steps=np.arange(1, 151) * 90,
+               cpu_s=np.float64(12.5), play=np.full(PLAY_EPISODES, -95.0))
+    store_arrays(stored_seed(store, 0, agent_key("Acrobot-v1", "ppo")), ppo)
+    argv = ["versus", "--task", "gymnasium:Acrobot-v1", "--agents", "rln", "--seeds", "0-0",
+            "--deep-seeds", "1", "--workers", "1", "--out", str(tmp_path)]
+    assert main(argv) == 0
+    report = (tmp_path / "VERSUS_TASKS.md").read_text()
+    assert "| Acrobot-v1 | RLN agent, preset acrobot_v1 | 1 of 1 |" in report
+    assert "| Acrobot-v1 | PPO, rl-zoo3's hyperparameters (stable-baselines3) | 1 of 1 | 9,000 " \
+           "| 12.5 | 100% |" in report
+    with open(tmp_path / "data" / "versus_Acrobot-v1_seeds.csv") as f:
+        assert [(r["agent"], r["seed"]) for r in csv.DictReader(f)] == [("rln", "0"),
+                                                                        ("ppo", "0")]
 
 
 @pytest.mark.parametrize("argv, message", [

@@ -233,17 +233,16 @@ def cmd_versus(args) -> None:
 
 
 def versus_task(args, agents: list[str], seeds: list[int], out: Path) -> None:
-    """versus --task: the task's agent-seeds run (or stored), then the report of every task
-    stored so far."""
+    """versus --task: the named agents' seeds of the task run (or stored), then the report of
+    every agent and task stored so far."""
     identifier = task_versus.task_id(args.task)
     task_versus.check_agents(agents, args.stored_only)
     store = out / "data" / "versus_tasks"
     by_task = {}
     for other in task_versus.TASKS:
-        mine = other == identifier
-        results = task_versus.run_task_versus(
-            other, agents if mine else list(task_versus.AGENTS), seeds, args.deep_seeds, store,
-            args.workers, args.stored_only or not mine)
+        to_run = [] if args.stored_only or other != identifier else agents
+        results = task_versus.run_task_versus(other, to_run, seeds, args.deep_seeds, store,
+                                              args.workers)
         if any(results.values()):
             by_task[other] = results
     if identifier not in by_task:

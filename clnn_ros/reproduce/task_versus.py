@@ -123,11 +123,12 @@ def has_entry(identifier: str, agent: str) -> bool:
     return agent != "dqn" or TASKS[identifier].actions is None
 
 
-def run_task_versus(identifier: str, agents: list[str], seeds: list[int], deep_seeds: int,
-                    store: Path, workers: int, stored_only: bool = False) -> dict:
-    """{agent: {seed: arrays}} of the task: each agent-seed stored, or run now and stored
-    (stored_only: left out). The deep agents on the first `deep_seeds` seeds."""
-    results = {agent: {} for agent in agents if has_entry(identifier, agent)}
+def run_task_versus(identifier: str, to_run: list[str], seeds: list[int], deep_seeds: int,
+                    store: Path, workers: int) -> dict:
+    """{agent: {seed: arrays}} of the task, every agent's stored seeds (so that a run of one
+    agent leaves the others in the report), the agents in `to_run` run now where not stored.
+    The deep agents on the first `deep_seeds` seeds."""
+    results = {agent: {} for agent in AGENTS if has_entry(identifier, agent)}
     pending = {}
     for agent in results:
         key = agent_key(identifier, agent)
@@ -135,7 +136,7 @@ def run_task_versus(identifier: str, agents: list[str], seeds: list[int], deep_s
             path = stored_seed(store / identifier / agent, seed, key)
             if path.exists():
                 results[agent][seed] = load_stored(path)
-            elif not stored_only:
+            elif agent in to_run:
                 pending[agent, seed] = path
     jobs = [(identifier, seed) if agent == "rln" else (identifier, agent, seed)
             for agent, seed in pending]
