@@ -1,12 +1,13 @@
 """The task batch engine: a whole episode of a task compiled, its step included, for the tasks
-whose step is compiled (clnn_ros.tasks.classic_control: Acrobot-v1, MountainCar-v0).
+whose step is compiled (clnn_ros.tasks.compiled: Acrobot-v1, MountainCar-v0,
+InvertedPendulum-v5).
 
 It runs the core's own rule compiled (inference, exploring, tagging, the success counter's
 outcome, punishment and reward: the `jitable` functions of clnn_ros.core.rln, as the cart-pole's
 batch engine does) around the task's compiled step; what is its own is only the episode loop,
 core.episode.play_trial's, and the cache of the network's decision per input pattern that the
 core's agent keeps too (RLNAgent._decide). Each trial starts where Gymnasium's own reset puts it
-(the task's steps draw on no random stream, so the starts do not depend on what the agent did).
+(the tasks' steps draw on no random stream, so the starts do not depend on what the agent did).
 
 tests/test_task_batch.py proves it equal to the core's task episode in Gymnasium's own
 environment (core.task_episode.run_task_episode) trial by trial and in the final weights, bit
@@ -27,17 +28,18 @@ from .core.rln import (NEVER, NONE, TIE_RANDOM, Rule, explore, infer, outcome, r
                        update)
 from .core.task import Task
 from .core.task_episode import TaskEpisodeResult
-from .tasks import classic_control
+from .tasks import classic_control, compiled, mujoco_control
 from .tasks.gymnasium_task import GymnasiumEnvironment, env_id
 
 MAX_CACHED_PATTERNS = 1 << 16  # more input patterns than this: a decision is made every tick
 
 
 @numba.njit(cache=True)
-def _episode(task, weights, starts, n_values, components, edges, offsets, max_steps,
-             truncation, rule, learn, rng, steps_out, returns_out, terminated_out):
+def _episode(task, sim, forces, weights, starts, n_values, components, edges, offsets,
+             max_steps, truncation, rule, learn, rng, steps_out, returns_out, terminated_out):
     """One seed's episode in place (`weights` end as the final weights; per trial its steps,
-    return and whether it terminated), from each trial's start state `starts[trial]`."""
+    return and whether it terminated), from each trial's start state `starts[trial]`
+    (tasks.compiled: the task's code, its simulation and its actions' forces)."""
     n_neurons, n_segments, n_inputs = weights.shape
     n_vars = components.shape[0]
     radix = np.empty(n_vars, dtype=np.int64)  # inputs per variable
@@ -61,7 +63,8 @@ def _episode(task, weights, starts, n_values, components, edges, offsets, max_st
             decisions[:, 0] = STALE
         successes = trial_start_count(successes, rule)
         state[:] = starts[trial]
-        classic_control.observe(task, state, values)
+        compiled.begin(task, state, sim)
+        compiled.observe(task, state, sim, values)
         steps, total, terminated = 0, 0.0, False
         while steps < max_steps:
             encode_active(values, components, edges, offsets, active)
@@ -75,8 +78,8 @@ def _episode(task, weights, starts, n_values, components, edges, offsets, max_st
             neuron = explore(decisions[pattern, 0], n_neurons, rule, rng)
             tag_action_path(punish_tagged_at, reward_tagged_at, eligible, neuron,
                             decisions[pattern, 1:], active, now, rule)
-            reward, terminated = classic_control.step(task, state, neuron)
-            classic_control.observe(task, state, values)
+            reward, terminated = compiled.step(task, state, sim, forces, neuron)
+            compiled.observe(task, state, sim, values)
             total += reward
             kind, successes = outcome(successes, terminated, rule)
             if learn:
@@ -90,12 +93,13 @@ def _episode(task, weights, starts, n_values, components, edges, offsets, max_st
         steps_out[trial], returns_out[trial], terminated_out[trial] = steps, total, terminated
 
 
-drop_stale_cache((_episode,), "task_batch.core_sources.sha256", (classic_control,))
+drop_stale_cache((_episode,), "task_batch.core_sources.sha256",
+                 (compiled, classic_control, mujoco_control))
 
 
 def compiles(task: Task) -> bool:
     """Whether the task's step is compiled (the engine runs it)."""
-    return env_id(task.name) in classic_control.COMPILED
+    return env_id(task.name) in compiled.COMPILED
 
 
 def run_compiled_task_episode(seed: int, p: Params, task: Task, env: GymnasiumEnvironment,
@@ -105,16 +109,17 @@ def run_compiled_task_episode(seed: int, p: Params, task: Task, env: GymnasiumEn
     same result. `env` (gymnasium_task.make's, of a task that compiles) gives the trials'
     starts."""
     task.check(p)
+    compiled_task = compiled.CompiledTask(task, env.env)
     starts = []
     for trial in range(p.trials):
         env.reset(STARTS_SEED + seed if trial == 0 else None)
-        starts.append(classic_control.start_state(env.env))
+        starts.append(compiled_task.start_state(env.env))
     weights = (seed_setup(seed, p)[0] if weights is None else weights).astype(np.float64)
     steps = np.zeros(p.trials, dtype=np.int64)
     returns = np.zeros(p.trials, dtype=np.float64)
     terminated = np.zeros(p.trials, dtype=bool)
     components, edges, offsets = Encoder.from_params(p, task.names, task.units).arrays
-    _episode(classic_control.COMPILED[env_id(task.name)], weights,
+    _episode(compiled_task.code, compiled_task.sim, compiled_task.forces, weights,
              np.array(starts, dtype=np.float64).reshape(p.trials, -1), len(task.variables),
              components, edges, offsets, p.max_steps,
              task.max_steps if task.max_steps is not None else p.max_steps,

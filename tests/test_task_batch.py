@@ -1,5 +1,5 @@
 """The task batch engine (clnn_ros.task_batch) and its compiled steps
-(clnn_ros.tasks.classic_control) equal Gymnasium's own steps and the core's task episode, bit
+(clnn_ros.tasks.compiled) equal Gymnasium's own steps and the core's task episode, bit
 for bit."""
 
 from __future__ import annotations
@@ -15,32 +15,44 @@ import pytest
 from clnn_ros.core.episode import seed_setup
 from clnn_ros.core.task_episode import run_task_episode
 from clnn_ros.task_batch import compiles, run_compiled_task_episode
-from clnn_ros.tasks import classic_control
+from clnn_ros.tasks import compiled
 from clnn_ros.tasks.gymnasium_task import make, task_params
 
 
-@pytest.mark.parametrize("name", sorted(classic_control.COMPILED))
+@pytest.mark.parametrize("name", sorted(compiled.COMPILED))
 def test_a_compiled_step_is_gymnasiums_bit_for_bit(name):
-    """Random actions from Gymnasium's own starts: every step's state, observation, reward and
-    termination alike (the Acrobot's squares through libm's pow: as x * x, 11 of these 30
-    trajectories part)."""
+    """Random actions from Gymnasium's own starts: every step's observation, reward and
+    termination alike, and the state behind them (the Acrobot's squares through libm's pow: as
+    x * x, 11 of these 30 trajectories part)."""
     import gymnasium
 
-    code, env = classic_control.COMPILED[name], gymnasium.make(name)
+    task, _ = make(f"gymnasium:{name}")
+    env = gymnasium.make(name)
+    engine = compiled.CompiledTask(task, env)
+    given = [a.value if engine.code == compiled.INVERTED_PENDULUM else int(a.value)
+             for a in task.actions]
     actions = np.random.default_rng(1)
     values, terminations = np.empty(env.observation_space.shape[0]), 0
     for trajectory in range(30):
         observation, _ = env.reset(seed=trajectory)
-        state = classic_control.start_state(env)
-        classic_control.observe(code, state, values)
+        state = engine.start_state(env)
+        compiled.begin(engine.code, state, engine.sim)
+        compiled.observe(engine.code, state, engine.sim, values)
         assert values.tolist() == observation.tolist()
         for _ in range(500):
-            action = int(actions.integers(3))
-            observation, reward, terminated, truncated, _ = env.step(action)
-            assert classic_control.step(code, state, action) == (reward, terminated)
-            classic_control.observe(code, state, values)
+            action = int(actions.integers(len(given)))
+            observation, reward, terminated, truncated, _ = env.step(
+                np.array([given[action]], dtype=env.action_space.dtype)
+                if engine.code == compiled.INVERTED_PENDULUM else given[action])
+            assert compiled.step(engine.code, state, engine.sim, engine.forces,
+                                 action) == (reward, terminated)
+            compiled.observe(engine.code, state, engine.sim, values)
             assert values.tolist() == observation.tolist()
-            assert state.tolist() == np.asarray(env.unwrapped.state, dtype=float).tolist()
+            if engine.code == compiled.INVERTED_PENDULUM:  # MuJoCo's data, not only what it shows
+                assert engine.sim[2].tolist() == env.unwrapped.data.qpos.tolist()
+                assert engine.sim[3].tolist() == env.unwrapped.data.qvel.tolist()
+            else:
+                assert state.tolist() == np.asarray(env.unwrapped.state, dtype=float).tolist()
             if terminated or truncated:
                 terminations += terminated
                 break
@@ -57,20 +69,24 @@ def test_a_compiled_step_is_gymnasiums_bit_for_bit(name):
     ("gymnasium:MountainCar-v0", {}),
     ("gymnasium:MountainCar-v0", {"omega": "16", "variable_edges": "position:-0.5;velocity:0",
                                   "segments": "2"}),
+    ("gymnasium:InvertedPendulum-v5", {}),
+    ("gymnasium:InvertedPendulum-v5", {"actions": "-1,0.3,1", "tie_break": "random"}),
 ])
 def test_the_task_batch_engine_is_the_cores_episode_bit_for_bit(name, changes):
-    task, _ = make(name)
+    actions = changes.get("actions")  # a Box action space's declared values (float32 there)
+    task, _ = make(name, actions)
     assert compiles(task)
-    p = task_params(task, {"trials": "8", "sigma": "32", "omega": "64", **changes})
-    ours = run_compiled_task_episode(7, p, task, make(name)[1])
-    core = run_task_episode(7, p, task, make(name)[1])
+    p = task_params(task, {"trials": "8", "sigma": "32", "omega": "64",
+                           **{k: v for k, v in changes.items() if k != "actions"}})
+    ours = run_compiled_task_episode(7, p, task, make(name, actions)[1])
+    core = run_task_episode(7, p, task, make(name, actions)[1])
     assert ours.steps.tolist() == core.steps.tolist()
     assert ours.returns.tolist() == core.returns.tolist()
     assert ours.terminated.tolist() == core.terminated.tolist()
     assert np.array_equal(ours.final_weights, core.final_weights)
     assert not np.array_equal(core.final_weights, seed_setup(7, p)[0])  # it learned
-    frozen = run_compiled_task_episode(7, p, task, make(name)[1], learn=False)
-    assert frozen.steps.tolist() == run_task_episode(7, p, task, make(name)[1],
+    frozen = run_compiled_task_episode(7, p, task, make(name, actions)[1], learn=False)
+    assert frozen.steps.tolist() == run_task_episode(7, p, task, make(name, actions)[1],
                                                      learn=False).steps.tolist()
 
 

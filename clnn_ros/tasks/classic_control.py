@@ -1,6 +1,6 @@
 """Gymnasium's Acrobot-v1 and MountainCar-v0 steps, compiled: the same numbers as Gymnasium's
 own `step()`, bit for bit (tests/test_task_batch.py), at a microsecond a step instead of 40-180
-(Acrobot's Python RK4), for the task batch engine (clnn_ros.task_batch).
+(Acrobot's Python RK4), for the task batch engine (clnn_ros.task_batch, through tasks.compiled).
 
 Each is a port of gymnasium/envs/classic_control (acrobot.py, mountain_car.py, Gymnasium 1.x),
 operation for operation in the same order, as core.gym_physics is of cartpole.py. Two things
@@ -24,9 +24,6 @@ import llvmlite.binding as llvm
 import numba
 import numpy as np
 from numba import types
-
-ACROBOT, MOUNTAIN_CAR = 0, 1
-COMPILED = {"Acrobot-v1": ACROBOT, "MountainCar-v0": MOUNTAIN_CAR}  # Gymnasium ID -> code
 
 # libm's pow under a name LLVM does not know: under its own, LLVM would make pow(x, 2.0) x * x.
 # Called by that name, the compiled code keeps no address of this process: numba can cache it.
@@ -138,22 +135,6 @@ def mountain_car_step(state, action):
 def mountain_car_observe(state, out):
     out[0] = np.float32(state[0])
     out[1] = np.float32(state[1])
-
-
-@numba.njit(cache=True)
-def step(task, state, action):
-    """The step of task ACROBOT or MOUNTAIN_CAR: (reward, terminated), the state in place."""
-    if task == ACROBOT:
-        return acrobot_step(state, action)
-    return mountain_car_step(state, action)
-
-
-@numba.njit(cache=True)
-def observe(task, state, out):
-    if task == ACROBOT:
-        acrobot_observe(state, out)
-    else:
-        mountain_car_observe(state, out)
 
 
 def start_state(env) -> np.ndarray:
