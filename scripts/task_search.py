@@ -2,7 +2,8 @@
 the task's space of candidate values (stage 1: few seeds), then the best candidates again on
 every selection seed (stage 2). Every candidate's row is kept, the failures too.
 
-    .venv/bin/python scripts/task_search.py gymnasium:Acrobot-v1 [--samples 48] [--out docs/data]
+    .venv/bin/python scripts/task_search.py gymnasium:Acrobot-v1 [--samples 48] [--trials 600]
+                                            [--finalists 6] [--out docs/data]
 
 Ranked by: seeds solved, then the median environment steps to solve (fewer first), then the mean
 return of the last 100 episodes. The seeds are learned as `clnn-reproduce sweep --task` learns
@@ -53,6 +54,22 @@ SPACES = {
         "explore": ["0", "0.01", "0.05"],
         "tagging": ["winner", "both_neurons"],
     },
+    # from CartPole-v1's preset carried over (docs/TASKS.md: 442-476 after 800 episodes), actions
+    # -1 and +1 N; all four variables (the slider's position too) or the three of CartPole-v1's
+    "gymnasium:InvertedPendulum-v5": {
+        "state_vars": ["hinge_angle,hinge_angular_velocity,slider_velocity",
+                       "slider_position,hinge_angle,slider_velocity,hinge_angular_velocity"],
+        "variable_edges": ["slider_position:-0.5,0.5;hinge_angle:0;slider_velocity:-0.2,0.2;"
+                           "hinge_angular_velocity:-0.17453292519943295,0.17453292519943295",
+                           "slider_position:0;hinge_angle:-0.02,0,0.02;slider_velocity:0;"
+                           "hinge_angular_velocity:-0.17453292519943295,0.17453292519943295"],
+        "segments": ["9", "16"],
+        "omega": ["64", "96", "128", "192"],
+        "sigma": ["32", "64", "128"],
+        "punish": ["0.015625", "0.0625"],
+        "rho_plus": ["0.0078125", "0.03125"],
+        "rho_minus": ["0", "0.00390625"],
+    },
 }
 SELECTION = range(128, 256)
 STAGE_1_SEEDS = range(128, 136)
@@ -95,6 +112,8 @@ def main(argv=None) -> int:
     parser.add_argument("task", choices=sorted(SPACES))
     parser.add_argument("--samples", type=int, default=48)
     parser.add_argument("--trials", type=int, default=600)
+    parser.add_argument("--finalists", type=int, default=FINALISTS,
+                        help="stage 1's best, run again on every selection seed")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", default="docs/data")
     args = parser.parse_args(argv)
@@ -108,7 +127,7 @@ def main(argv=None) -> int:
         print(f"task_search: error: {error}", file=sys.stderr)
         return 2
     order = sorted(range(len(configs)), key=lambda k: rank(stage_1[k]))
-    finalists = order[:FINALISTS]
+    finalists = order[:args.finalists]
     stage_2 = evaluate(args.task, [configs[k] for k in finalists], SELECTION, args.trials,
                        out / "task_search_runs", args.workers)
     rows = [[1, *configs[k].values(), *stage_1[k]] for k in order]
