@@ -63,6 +63,17 @@ PRESETS = {
         {"task": "gymnasium:MountainCar-v0", "state_vars": "position,velocity",
          "variable_edges": "position:-0.9,-0.5,-0.2;velocity:-0.005,0,0.005", "omega": "120",
          "sigma": "128", "rho_minus": "0.00390625"}),
+    "inverted_pendulum_v5": Preset(
+        "Gymnasium's InvertedPendulum-v5 with forces -1 and +1, the search's best, which does NOT "
+        "solve it: hinge angle (one edge, 0 rad), its angular velocity (+-0.1745 rad/s) and the "
+        "slider's velocity (+-0.2 m/s) encoded, 16 segments per neuron, a reward every 64 "
+        "steps, punishment window 128 and 8x Table 2's punishment, rho_plus 4x, rho_minus 1/256",
+        {"task": "gymnasium:InvertedPendulum-v5",
+         "state_vars": "hinge_angle,hinge_angular_velocity,slider_velocity",
+         "variable_edges": "slider_position:-0.5,0.5;hinge_angle:0;slider_velocity:-0.2,0.2;"
+                           "hinge_angular_velocity:-0.17453292519943295,0.17453292519943295",
+         "segments": "16", "omega": "128", "sigma": "64", "punish": "0.0625",
+         "rho_plus": "0.03125", "rho_minus": "0.00390625"}),
 }
 
 

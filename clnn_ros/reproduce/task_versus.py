@@ -42,7 +42,7 @@ TASKS = {
     "Acrobot-v1": TaskSetup(500, "acrobot_v1"),
     "MountainCar-v0": TaskSetup(1000, "mountain_car_v0"),
     "LunarLander-v3": TaskSetup(1000),
-    "InvertedPendulum-v5": TaskSetup(1000, actions="-1,1"),
+    "InvertedPendulum-v5": TaskSetup(1000, "inverted_pendulum_v5", actions="-1,1"),
     "InvertedDoublePendulum-v5": TaskSetup(1000, actions="-1,0,1"),
 }
 AGENTS = {"rln": "RLN agent", "ppo": "PPO, rl-zoo3's hyperparameters (stable-baselines3)",
