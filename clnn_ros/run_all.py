@@ -32,7 +32,7 @@ import yaml
 from . import bag
 from .cli import OneLineArgumentParser
 from .core.checkpoint import Checkpoint, load_checkpoint
-from .core.params import CARTPOLE, PROTOCOLS, STATE_NAMES, ParamError, Params
+from .core.params import CARTPOLE, PROTOCOLS, STATE_NAMES, ParamError
 from .core.presets import PRESETS, check_preset_task
 from .files import cannot_create
 from .graph.names import NOT_STARTED, RECORDER, TRIAL_MANAGER, namespace_problem
@@ -81,13 +81,14 @@ def parse_args(argv):
                         help="a ROS 2 parameters YAML (/**: ros__parameters: ...); options win")
     parser.add_argument("--composed", action="store_true",
                         help="all nodes in one process with one executor")
-    parser.add_argument("--env", type=environment_choice, default="cartpole",
+    parser.add_argument("--env", type=environment_choice,
                         metavar="{" + ",".join(ENVIRONMENTS) + f",{PREFIX}ID}}",
                         help="environment node: the paper's cart-pole, gymnasium's CartPole-v1, "
                              "a cart-pole simulated by MuJoCo, any Gymnasium task (e.g. "
                              f"{PREFIX}Acrobot-v1: its first encoding, docs/TASKS.md), or "
                              "external: start none and wait (--stall-timeout) for one that "
-                             "someone else starts (a robot's; docs/ENV_CONTRACT.md)")
+                             "someone else starts (a robot's; docs/ENV_CONTRACT.md); default "
+                             "cartpole, or a resumed checkpoint's Gymnasium task")
     parser.add_argument("--actions", metavar="VALUES", help=f"--env {PREFIX}ID with a Box action "
                         f"space: the values the agent may apply, e.g. --actions=-1,1")
     parser.add_argument("--namespace", metavar="NAME",
@@ -203,8 +204,8 @@ def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
     if args.init_weights:  # the nodes get a file by its full path
         flags["init_weights"] = args.init_weights if args.init_weights in OPTIMAL else \
             str(Path(args.init_weights).resolve())
-    defaults = gymnasium_task.graph_defaults(
-        args.env, DEMO if checkpoint is None else checkpoint_values(checkpoint), args.actions)
+    defaults = {**gymnasium_task.graph_defaults(args.env, DEMO, args.actions),
+                **(checkpoint_values(checkpoint) if checkpoint else {})}
     if args.preset is not None and args.env_node is None and args.env != "external":
         check_preset_task(args.preset, args.env if args.env.startswith(PREFIX) else CARTPOLE)
     if args.env_node is None and args.env in SIMULATORS:
@@ -222,16 +223,17 @@ def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
         raise ParamError(f"--velocity-edge needs cart_velocity among the state variables "
                          f"(this run encodes {','.join(params.state_vars)})")
     # what each node will do with init_weights, here first: one line for what does not fit
-    episode_start(values.get("init_weights", ""), values["seed"], params)
+    if episode_start(values.get("init_weights", ""), values["seed"], params).resume \
+            and args.env.startswith(PREFIX) and args.env_node is None:
+        gymnasium_task.check_resumable(args.env)
     return values
 
 
 def checkpoint_values(checkpoint: Checkpoint) -> dict:
-    """A checkpoint's seed, trials and every parameter it has not at its default."""
-    defaults = Params().to_dict()
-    values = {k: v for k, v in checkpoint.params.to_dict().items() if v != defaults[k]}
-    return {**values, "seed": checkpoint.seed, "trials": checkpoint.params.trials,
-            "nsv": checkpoint.params.nsv}
+    """A checkpoint's seed and every model parameter (the agent that saved it took them all;
+    None: a value derived from the others, e.g. segments from nsv)."""
+    values = {k: v for k, v in checkpoint.params.to_dict().items() if v is not None}
+    return {**values, "seed": checkpoint.seed}
 
 
 def main(argv=None) -> int:
@@ -241,6 +243,9 @@ def main(argv=None) -> int:
             raise ParamError(problem)
         checkpoint = load_checkpoint(args.init_weights) \
             if args.init_weights and args.init_weights.endswith(".npz") else None
+        if args.env is None:
+            resumed = checkpoint.params.task if checkpoint else CARTPOLE
+            args.env = resumed if resumed.startswith(PREFIX) else "cartpole"
         values = build_parameters(args, checkpoint)
     except ParamError as error:  # a CheckpointError too
         print(f"run_all: error: {error}", file=sys.stderr)

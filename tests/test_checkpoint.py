@@ -1,6 +1,7 @@
 """Checkpoint and resume: an episode split at a trial boundary equals the uninterrupted one, in
-the core and in the real ROS graph; run_all --init-weights refuses bad files with one line
-before any node starts; fig7 weights in the graph equal the core; the agent's save service."""
+the core and in the real ROS graph (the cart-pole and a Gymnasium task); run_all --init-weights
+refuses bad files, and a task that cannot resume, with one line before any node starts; fig7
+weights in the graph equal the core; the agent's save service."""
 
 from __future__ import annotations
 
@@ -12,12 +13,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from clnn_ros.core.checkpoint import FORMAT, CheckpointError, load_checkpoint, save_checkpoint
-from clnn_ros.core.episode import run_episode
+from clnn_ros.core.agent import RLNAgent, SuccessCounter
+from clnn_ros.core.checkpoint import (FORMAT, CheckpointError, capture, load_checkpoint,
+                                      save_checkpoint)
+from clnn_ros.core.episode import run_episode, seed_setup
 from clnn_ros.core.optimal import optimal_weights
-from clnn_ros.core.params import Params
+from clnn_ros.core.params import ParamError, Params
 from clnn_ros.core.physics import CONTINUE
 from clnn_ros.core.init_weights import EpisodeStart, episode_start, load_weights
+from clnn_ros.core.task_episode import run_task_episode
+from clnn_ros.tasks.gymnasium_task import (KNOWN, PREFIX, GymnasiumTaskEnvironment,
+                                           check_resumable, make, task_params)
 
 from conftest import free_domain_id, ros_environment
 from test_graph import run_all
@@ -145,6 +151,85 @@ def test_graph_resumed_episode_equals_the_uninterrupted_one(ros_env, tmp_path):
     core = run_episode(SEED, Params(trials=12, max_steps=1500, **CARRY))
     assert [int(row.split(",")[3]) for row in read_rows(whole)] == core.steps.tolist()
     assert load_checkpoint(rest / "checkpoint.npz").next_trial == 12
+
+
+RESUMED_RUNS = {
+    # protocol and max_steps are not the network's: once lost in the checkpoint, the resumed
+    # trials ran the paper's protocol
+    "cartpole_v1_protocol": (["--protocol", "gymnasium", "--max-steps", "500"], 4, 8),
+    # its environment makes the resets before the resumed trial again
+    "inverted_pendulum": (["--env", "gymnasium:InvertedPendulum-v5", "--max-steps", "200"], 3, 6),
+}
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize("name", RESUMED_RUNS)
+def test_graph_resume_runs_the_saved_episodes_parameters(ros_env, tmp_path, name):
+    """First trials in 5 processes, the rest resumed (composed) from the checkpoint alone: the
+    trials and final weights of the core's uninterrupted episode."""
+    args, split, trials = RESUMED_RUNS[name]
+    first, rest = tmp_path / "first", tmp_path / "rest"
+    for out, run_args in (
+            (first, [*args, "--seed", str(SEED), "--trials", str(split)]),
+            (rest, ["--init-weights", str(first / "checkpoint.npz"), "--trials", str(trials),
+                    "--composed"])):
+        result = run_all(ros_env, *run_args, "--no-record", "--out", str(out))
+        assert result.returncode == 0, result.stderr
+    rows = [row.split(",") for row in read_rows(first) + read_rows(rest)]
+    if name == "inverted_pendulum":
+        task, env = make("gymnasium:InvertedPendulum-v5")
+        core = run_task_episode(SEED, task_params(task, {"trials": str(trials),
+                                                         "max_steps": "200"}), task, env)
+        expected = (core.steps - core.terminated).tolist()  # the graph's successful steps
+    else:
+        core = run_episode(SEED, Params(protocol="gymnasium", max_steps=500, trials=trials))
+        expected = core.steps.tolist()
+    assert [int(row[3]) for row in rows] == expected
+    assert len({row[3] for row in rows}) > 1  # the trials' starts differ, and the steps show it
+    np.testing.assert_array_equal(np.load(rest / "final_weights.npy"), core.final_weights)
+
+
+def test_a_task_environment_starts_a_resumed_trial_as_the_uninterrupted_episode_does():
+    """Its trial k: the seeded reset and k more, as many as the episode made before it (steps in
+    between draw nothing in the families check_resumable lets resume)."""
+    params = task_params(make("gymnasium:Acrobot-v1")[0])
+    played = GymnasiumTaskEnvironment(params)
+    for trial in range(3):
+        start = played.start(SEED, trial, 0.0)
+        for action in (0, 2, 1, 2):
+            played.step(action)
+    np.testing.assert_array_equal(GymnasiumTaskEnvironment(params).start(SEED, 2, 0.0), start)
+
+
+@pytest.mark.parametrize("identifier", sorted(KNOWN))
+def test_check_resumable_knows_whose_steps_draw(identifier):
+    """The families check_resumable lets resume never move the random stream in step();
+    LunarLander's steps do, and it is refused in one line."""
+    task, env = make(PREFIX + identifier)
+    env.reset(SEED)  # a seeded reset makes the stream anew
+    stream = env.env.unwrapped.np_random.bit_generator
+    before = stream.state
+    for action in range(len(task.actions)):
+        env.step(action)
+    if identifier == "LunarLander-v3":
+        assert stream.state != before
+        with pytest.raises(ParamError, match="cannot resume from a checkpoint: its steps may "
+                                             "draw from its random stream"):
+            check_resumable(PREFIX + identifier)
+    else:
+        assert stream.state == before
+        check_resumable(PREFIX + identifier)
+
+
+def test_a_task_that_cannot_resume_is_refused_before_any_node_starts(ros_env, tmp_path):
+    params = task_params(make("gymnasium:LunarLander-v3")[0], {"trials": "2"})
+    agent = RLNAgent(params, seed_setup(SEED, params)[0], seed=SEED)
+    path = save_checkpoint(tmp_path / "c.npz", capture(agent, SuccessCounter(params), SEED, 1))
+    result = run_all(ros_env, "--no-record", "--init-weights", str(path), "--trials", "3",
+                     timeout=30)
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.startswith("run_all: error: gymnasium:LunarLander-v3 cannot resume")
+    assert len(result.stderr.strip().splitlines()) == 1 and "run_all: seed" not in result.stdout
 
 
 @pytest.mark.ros

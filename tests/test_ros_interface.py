@@ -109,7 +109,8 @@ def test_parameters_describe_their_meaning_and_constraints(agent_by_hand):
 @pytest.mark.parametrize("node", ["encoder", "agent"])
 def test_a_node_declares_only_the_parameters_it_uses(ros_env, node):
     """One params file serves the whole graph; each node declares what it uses (NODE_PARAMETERS)
-    and ignores the run's other values: `ros2 param list /encoder` shows no sigma."""
+    and ignores the run's other values: `ros2 param list /encoder` shows no sigma. The agent
+    takes every model parameter (its checkpoints hold the whole episode's), physics included."""
     process = subprocess.Popen([sys.executable, "-m", f"clnn_ros.nodes.{node}", "--ros-args",
                                 "-r", f"__ns:=/only_{node}", "-p", "sigma:=128",
                                 "-p", "physics:=correct", "-p", "use_sim_time:=true"],
@@ -130,7 +131,7 @@ def test_a_node_declares_only_the_parameters_it_uses(ros_env, node):
         process.communicate(timeout=20)
     assert set(listed) - set(RCLPY_PARAMETERS) == set(NODE_PARAMETERS[node]) | ({"segments"} if node == "agent"
                                                                   else set())
-    assert "physics" not in listed and ("sigma" in listed) == (node == "agent")
+    assert ("physics" in listed) == ("sigma" in listed) == (node == "agent")
     assert sim_time  # sim time on request at the start, for a user who wants the graph's clock
 
 

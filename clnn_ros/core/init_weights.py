@@ -17,7 +17,7 @@ import numpy as np
 from .checkpoint import (Checkpoint, CheckpointError, check_resumable, first_line,
                               load_checkpoint, restore_counter)
 from .optimal import optimal_weights
-from .params import CARTPOLE, Params
+from .params import Params
 from .agent import SuccessCounter
 
 # The names of the optimal weights, and the state variables they are made for.
@@ -47,9 +47,6 @@ def episode_start(setting: str, seed: int, params: Params,
     ParamError) with one line for a name or file that does not fit them. `compared`: the
     parameters a resumed checkpoint must agree on (a node's own; None: all)."""
     if setting.endswith(".npz"):
-        if params.task != CARTPOLE:  # its environment's own random stream is not in it
-            raise CheckpointError(f"a checkpoint resumes the cart-pole's episodes only, not "
-                                  f"{params.task}'s")
         checkpoint = load_checkpoint(setting)
         check_resumable(checkpoint, params, seed, compared)
         return EpisodeStart(resume=checkpoint)

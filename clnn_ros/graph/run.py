@@ -64,7 +64,10 @@ NODE_PARAMETERS = {
     "encoder": (*COMMON, *ENCODING, *STATE_RULE, "n_actions"),
     "reward": (*COMMON, *STATE_RULE, "sigma", "omega", "success_counter", "reward_mapping",
                *RESUME),
-    "agent": (*COMMON, *NETWORK, *LEARNING, *RESUME, "out_dir"),
+    # every model parameter: its checkpoints hold the whole episode's (a resume runs under the
+    # saving run's protocol, max_steps, physics, not under defaults)
+    "agent": (*COMMON, *dict.fromkeys((*NETWORK, *LEARNING, *Params().to_dict())), *RESUME,
+              "out_dir"),
     TRIAL_MANAGER: (*COMMON, *NETWORK, *STATE_RULE, *RESUME, "w_max", "n_angles",
                     "angle_span_deg", "protocol", "stall_timeout_s", "out_dir", "progress",
                     "external_nodes", "allow_foreign_publishers", "rate_hz"),

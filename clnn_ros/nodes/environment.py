@@ -28,6 +28,7 @@ from rclpy.task import Future
 from rosgraph_msgs.msg import Clock
 from visualization_msgs.msg import MarkerArray
 
+from ..core.params import ParamError
 from ..graph.fields import ACTION_NONE, stamp_nanoseconds, tick_nanoseconds, tick_stamp
 from ..graph.lockstep import Refusals
 from ..graph.names import ACTION, CLOCK, MARKERS, STATE, TASK, TRIAL_EVENT
@@ -132,14 +133,20 @@ class EnvironmentNode(Node):
         start, action = self.pending.get(TRIAL_EVENT), self.pending.get(ACTION)
         self.pending = {}
         state = self.state_msg  # one message object, refilled each tick (publish copies it)
-        if start is not None:
-            values = self.env.start(start.seed, start.trial, start.initial_angle_deg)
-            self.trial, self.successful_steps = start.trial, 0
-            state.reward, state.terminated, state.truncated, state.termination = 0.0, False, \
-                False, 0
-        else:
-            values, state.reward, state.terminated, state.truncated, state.termination = \
-                self.env.step(action.action)
+        try:
+            if start is not None:
+                values = self.env.start(start.seed, start.trial, start.initial_angle_deg)
+                self.trial, self.successful_steps = start.trial, 0
+                state.reward, state.terminated, state.truncated, state.termination = 0.0, \
+                    False, False, 0
+            else:
+                values, state.reward, state.terminated, state.truncated, state.termination = \
+                    self.env.step(action.action)
+        except ParamError as error:  # a start it cannot make again, an observation not numbers
+            self.failure = f"tick {self.tick}: {error}"
+            self.finished.set_result(1)
+            return
+        if start is None:
             self.successful_steps += not state.terminated
             state.truncated = bool(state.truncated) or (
                 not state.terminated and self.successful_steps >= self.params.max_steps)

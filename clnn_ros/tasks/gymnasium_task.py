@@ -180,10 +180,32 @@ def task_params(task: Task, values: dict[str, str] | None = None,
     return task.params({**dict(known.defaults if known else ()), **(values or {})}, base)
 
 
+# The families whose step() never draws from the environment's random stream (read in
+# Gymnasium's source; tests/test_checkpoint.py checks each known task): there, the stream at a
+# trial's start depends on the resets before it alone. LunarLander-v3's steps draw (its engines'
+# dispersion), so its trial k starts from a stream that its steps moved.
+RESETS_ALONE_DRAW = ("gymnasium.envs.classic_control", "gymnasium.envs.mujoco")
+
+
+def check_resumable(task_name: str) -> None:
+    """ParamError with one line unless an episode of `task_name` can resume at any trial: its
+    trial k starts where k resets after the seeded one put the environment's random stream."""
+    import gymnasium  # imported here: the rest of the project does not need it
+
+    spec = gymnasium.spec(env_id(task_name))
+    entry_point = spec.entry_point if isinstance(spec.entry_point, str) else \
+        f"{spec.entry_point.__module__}:"
+    if not entry_point.startswith(RESETS_ALONE_DRAW):
+        raise ParamError(f"{task_name} cannot resume from a checkpoint: its steps may draw from "
+                         f"its random stream ({entry_point.split(':')[0]}), so a later trial's "
+                         f"start cannot be made again from the seed")
+
+
 class GymnasiumTaskEnvironment:
     """A Gymnasium task as an environment node runs it (tasks.cartpole.CartPoleEnvironment's
     calls): trial 0 of seed s resets with seed STARTS_SEED + s, every later trial with None, as
-    core.task_episode does; no named terminations."""
+    core.task_episode does; no named terminations. A resumed episode's first trial k > 0 makes
+    the k resets before it again (check_resumable: where that gives the same start)."""
 
     termination_reasons = ()
 
@@ -193,8 +215,15 @@ class GymnasiumTaskEnvironment:
             raise ParamError(f"task {self.task.name} has {len(self.task.actions)} actions "
                              f"({', '.join(self.task.action_labels)}); n_actions is "
                              f"{params.n_actions}")
+        self.next_trial = 0  # the trial whose start the environment's next reset() draws
 
     def start(self, seed: int, trial: int, _initial_angle_deg: float) -> np.ndarray:
+        if trial != self.next_trial and trial > 0:  # a resumed episode
+            check_resumable(self.task.name)
+            self.env.reset(STARTS_SEED + seed)
+            for _ in range(trial - 1):
+                self.env.reset(None)
+        self.next_trial = trial + 1
         return self.env.reset(STARTS_SEED + seed if trial == 0 else None)
 
     def step(self, action: int) -> tuple:
