@@ -25,8 +25,8 @@ from tqdm import tqdm
 
 from clnn_ros.batch import run_batch
 from clnn_ros.core.episode import run_episode
-from clnn_ros.core.gym_physics import GYM_PHYSICS, gym_matched_params
-from clnn_ros.core.mujoco_physics import MujocoCartPole
+from clnn_ros.core.physics import GYM_PHYSICS, gym_matched_params
+from clnn_ros.tasks.cartpole.mujoco_cartpole import MujocoCartPole
 from clnn_ros.core.params import params_from_strings
 from clnn_ros.core.physics import CartPole, at_rest
 from clnn_ros.core.presets import preset_values
@@ -247,7 +247,7 @@ initial_angle_deg, steps, end_reason`; configs `mujoco_core`, `batch_semi_implic
 
 ## The plant
 
-`clnn_ros/core/mujoco_physics.py`, `MujocoCartPole`: an MJCF cart-pole stepped by MuJoCo, with
+`clnn_ros/tasks/cartpole/mujoco_cartpole.py`, `MujocoCartPole`: an MJCF cart-pole stepped by MuJoCo, with
 gymnasium CartPole-v1's constants: cart 1.0 kg on a frictionless slide joint, pole 0.1 kg on an
 undamped hinge about y, centre of mass 0.5 m above the hinge and the inertia of a uniform 1.0 m
 rod about its centre (0.1 x 1.0^2 / 12 kg m^2, so (4/3) m l^2 about the hinge, as in the

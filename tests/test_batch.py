@@ -6,7 +6,7 @@ import pytest
 from clnn_ros.batch import evaluate_weights_batch, run_batch
 from clnn_ros.core.episode import evaluate_weights, run_episode
 from clnn_ros.core.optimal import optimal_weights
-from clnn_ros.core.gym_physics import GYM_PHYSICS
+from clnn_ros.core.physics import GYM_PHYSICS
 from clnn_ros.core.params import (DECAY_COUNTERS, E_FLAGS, FIRST_ACTION, INFERENCE, INTEGRATORS,
                                   PHYSICS, PROTOCOLS, PUNISH_TIMING, SUCCESS_COUNTER, TAGGING,
                                   TIE_BREAKS, Params)

@@ -30,7 +30,8 @@ from clnn_ros.check_env.rules import (CHECKED_RUN, RUN_PHYSICS, check_physics, c
 from clnn_ros.live.check_env import RULES
 from clnn_ros.core.encoder import Encoder
 from clnn_ros.core.episode import run_episode
-from clnn_ros.core.gym_physics import GymCartPole, gym_matched_params
+from clnn_ros.core.physics import gym_matched_params
+from clnn_ros.tasks.cartpole.gymnasium_cartpole import GymCartPole
 from clnn_ros.core.params import ParamError, Params, params_from_strings
 from clnn_ros.core.physics import CartPole, at_rest
 from clnn_ros.graph.names import ENV_CONTRACT_VERSION, RECORDER
@@ -114,6 +115,7 @@ CHECKS = {
                         "FAIL  readiness: no readiness announcement"]),
 }
 PASSING = ("cartpole", "gymnasium", "example", "acrobot", "invertedpendulum", "point_to_goal")
+CHECKS_HANG_S = 600
 
 
 @pytest.fixture(scope="module")
@@ -123,15 +125,30 @@ def ros_env(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def checks(ros_env):
+def checks(ros_env, tmp_path_factory):
     """All checker runs at once, each in its own namespace of the module's domain (they mostly
-    wait on the node)."""
-    running = {name: subprocess.Popen(
-        [PY, "-m", "clnn_ros.live.check_env", "--domain-id", DOMAIN_ID, "--namespace",
-         f"/check_{name}", *options, *command],
-        cwd=ROOT, env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-        for name, (command, options, _) in CHECKS.items()}
-    return {name: (p.communicate(timeout=300)[0], p.returncode) for name, p in running.items()}
+    wait on the node; about 40 s in all here). One still running after CHECKS_HANG_S (a bound
+    against a hang, never a speed bound) is stopped with SIGABRT: Python's faulthandler writes
+    where each of its threads stood, and that is its report (its node exits with its stdin)."""
+    stderr = tmp_path_factory.mktemp("checkers")
+    running = {}
+    for name, (command, options, _) in CHECKS.items():
+        with open(stderr / name, "w") as log:
+            running[name] = subprocess.Popen(
+                [PY, "-m", "clnn_ros.live.check_env", "--domain-id", DOMAIN_ID, "--namespace",
+                 f"/check_{name}", *options, *command],
+                cwd=ROOT, env={**ros_env, "PYTHONFAULTHANDLER": "1"}, stdout=subprocess.PIPE,
+                stderr=log, text=True)
+    deadline, results = time.monotonic() + CHECKS_HANG_S, {}
+    for name, process in running.items():
+        try:
+            report = process.communicate(timeout=max(0.0, deadline - time.monotonic()))[0]
+        except subprocess.TimeoutExpired:
+            process.send_signal(signal.SIGABRT)
+            report = f"{process.communicate()[0]}\nstill running after {CHECKS_HANG_S} s; " \
+                     f"its threads:\n{(stderr / name).read_text()}"
+        results[name] = report, process.returncode
+    return results
 
 
 @pytest.mark.ros

@@ -1,4 +1,4 @@
-"""The MuJoCo cart-pole (clnn_ros/core/mujoco_physics.py, the environment node with simulator:=mujoco): the
+"""The MuJoCo cart-pole (clnn_ros/tasks/cartpole/mujoco_cartpole.py, the environment node with simulator:=mujoco): the
 plant's sign conventions and geometry, its agreement with the core's physics with the same
 constants, the contract checker on its node, and a `run_all --env mujoco` run equal to the core
 driving the same plant (docs/MUJOCO.md)."""
@@ -15,8 +15,8 @@ import pytest
 
 from clnn_ros.live.check_env import RULES
 from clnn_ros.core.episode import run_episode
-from clnn_ros.core.gym_physics import gym_matched_params
-from clnn_ros.core.mujoco_physics import MujocoCartPole
+from clnn_ros.core.physics import gym_matched_params
+from clnn_ros.tasks.cartpole.mujoco_cartpole import MujocoCartPole
 from clnn_ros.core.params import Params, params_from_strings
 from clnn_ros.core.physics import CONTINUE, FAIL_ANGLE, FAIL_POSITION, CartPole, at_rest
 from clnn_ros.core.presets import preset_values

@@ -17,7 +17,7 @@ import pytest
 from clnn_ros import run_all
 from clnn_ros.batch import run_batch
 from clnn_ros.core.encoder import Encoder
-from clnn_ros.core.gym_physics import GYM_PHYSICS, gym_matched_params
+from clnn_ros.core.physics import GYM_PHYSICS, gym_matched_params
 from clnn_ros.core.params import CARTPOLE, Params, params_from_strings
 from clnn_ros.core.physics import CartPole, at_rest
 from clnn_ros.core.presets import PRESETS, Preset, overlay_values, preset_task, preset_values

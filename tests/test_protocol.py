@@ -17,7 +17,8 @@ import pytest
 
 from clnn_ros.batch import run_batch
 from clnn_ros.core.episode import STARTS_SEED, returns, run_episode, trial_starts
-from clnn_ros.core.gym_physics import GymCartPole, gym_exact_params
+from clnn_ros.core.physics import gym_exact_params
+from clnn_ros.tasks.cartpole.gymnasium_cartpole import GymCartPole
 from clnn_ros.core.params import GYMNASIUM_MAX_STEPS, ParamError, Params, params_from_strings
 from clnn_ros.core.physics import (CONTINUE, FAIL_ANGLE, FAIL_POSITION, CartPole, at_rest,
                                    physics_constants)

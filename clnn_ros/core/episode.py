@@ -188,7 +188,7 @@ def run_episode(seed: int, p: Params, weights: np.ndarray | None = None, learn: 
                 resume: Checkpoint | None = None) -> EpisodeResult:
     """One episode with the seed protocol; `weights`/`angles` override the seed's own (`angles`:
     the paper's starts at these angles, deg); `env_factory(p)` makes the environment (e.g.
-    core.gym_physics.GymCartPole); `resume` continues a checkpoint with the seed's remaining
+    tasks.cartpole.gymnasium_cartpole.GymCartPole); `resume` continues a checkpoint with the seed's remaining
     trials (up to p.trials)."""
     agent, counter, first_trial = start_episode(seed, p, weights, resume)
     starts, in_radians = trial_starts(seed, p, angles)

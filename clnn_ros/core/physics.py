@@ -214,3 +214,22 @@ class CartPole:
         self.state_in_own_units = tuple(state)
         self.state = in_degrees(*state, self._radians)
         return status
+
+
+# Gymnasium's CartPole-v1 as Params values (gymnasium/envs/classic_control/cartpole.py: its
+# constants, true equations, explicit Euler, limits 12 deg and 2.4 m).
+GYM_PHYSICS = dict(cart_mass=1.0, pole_mass=0.1, pole_length=0.5, gravity=9.8, force=10.0,
+                   tau=0.02, physics="correct", integrator="euler", angle_limit_deg=12.0,
+                   track_limit_m=2.4)
+
+
+def gym_matched_params(p):
+    """p with the core's own physics made the same model as gymnasium's CartPole-v1 (used to
+    run the batch engine on gymnasium's physics)."""
+    return p.replace(**GYM_PHYSICS)
+
+
+def gym_exact_params(p):
+    """p with the core's own physics made gymnasium's CartPole-v1 step itself, bit for bit
+    (physics "gymnasium": its float operations, in radians), with its constants."""
+    return p.replace(**{**GYM_PHYSICS, "physics": "gymnasium"})

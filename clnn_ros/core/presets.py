@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .gym_physics import GYM_PHYSICS
+from .physics import GYM_PHYSICS
 from .params import CARTPOLE, ParamError
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import yaml
 
-from ..core.gym_physics import GYM_PHYSICS
+from ..core.physics import GYM_PHYSICS
 from ..core.params import (DECAY_COUNTERS, E_FLAGS, FIRST_ACTION, INFERENCE, INTEGRATORS,
                            MAX_ACTIONS, MAX_SEGMENTS, PHYSICS, PROTOCOLS, PUNISH_TIMING,
                            REWARD_MAPPINGS, STATE_NAMES, SUCCESS_COUNTER, TAGGING, TIE_BREAKS,

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import itertools
 
-from ..core.gym_physics import gym_matched_params
+from ..core.physics import gym_matched_params
 from ..core.params import GYMNASIUM_MAX_STEPS, Params, params_from_strings
 from ..core.presets import preset_values
 from ..core.solving import SOLVED_MEAN, WINDOW

@@ -28,7 +28,7 @@ import gymnasium
 import numpy as np
 
 from ..core.encoder import Encoder
-from ..core.gym_physics import GYM_PHYSICS
+from ..core.physics import GYM_PHYSICS
 from ..core.params import Params
 from ..core.agent import RLNAgent
 from .common import progress, write_csv

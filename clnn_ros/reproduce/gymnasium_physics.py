@@ -11,7 +11,8 @@ import numpy as np
 
 from ..batch import run_batch
 from ..core.episode import run_episode
-from ..core.gym_physics import GymCartPole, gym_matched_params
+from ..core.physics import gym_matched_params
+from ..tasks.cartpole.gymnasium_cartpole import GymCartPole
 from ..core.params import Params
 from .common import EDGE_SCAN, LITERAL_EDGE, STUCK_BELOW, TRIALS, md_table, progress, stuck, write_csv
 from .learning import PaperRuns

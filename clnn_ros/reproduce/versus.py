@@ -83,7 +83,7 @@ def one_seed(agent: str, seed: int) -> dict:
     """One seed of an agent other than `rln` (in a worker process): its training returns, the
     environment steps when each ended, its CPU seconds and its frozen play (none on MuJoCo)."""
     if agent == "rln_mujoco":
-        from ..core.mujoco_physics import MujocoCartPole
+        from ..tasks.cartpole.mujoco_cartpole import MujocoCartPole
         began = time.process_time()
         result = run_episode(seed, rln_params(), env_factory=MujocoCartPole)
         cpu_s = time.process_time() - began

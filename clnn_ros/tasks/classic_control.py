@@ -3,7 +3,7 @@ own `step()`, bit for bit (tests/test_task_batch.py), at a microsecond a step in
 (Acrobot's Python RK4), for the task batch engine (clnn_ros.task_batch, through tasks.compiled).
 
 Each is a port of gymnasium/envs/classic_control (acrobot.py, mountain_car.py, Gymnasium 1.x),
-operation for operation in the same order, as core.gym_physics is of cartpole.py. Two things
+operation for operation in the same order, as core.physics's `gymnasium` step is of cartpole.py. Two things
 keep the bits: Gymnasium squares NumPy scalars with `**`, which is libm's pow() (a square from
 pow differs from x * x in about one case in a thousand here), so the port calls libm's pow too,
 where numba would make x * x of it; and the observation is Gymnasium's float32 array, so the

@@ -32,8 +32,7 @@ from __future__ import annotations
 
 import math
 
-from .gym_physics import GYM_PHYSICS
-from .physics import CONTINUE, FAIL_ANGLE, FAIL_POSITION, start_in_units
+from ...core.physics import CONTINUE, FAIL_ANGLE, FAIL_POSITION, GYM_PHYSICS, start_in_units
 
 # The pole's inertia about its own axis: irrelevant to a hinge about y, but MuJoCo needs every
 # principal moment positive; a thin rod's is tiny.

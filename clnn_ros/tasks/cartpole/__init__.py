@@ -5,10 +5,10 @@ and its two ways to fail as named terminations."""
 
 from __future__ import annotations
 
-from ..core.episode import reset_for_trial, trial_start
-from ..core.params import ParamError, Params
-from ..core.physics import CONTINUE, CartPole
-from ..core.task import cartpole_task
+from ...core.episode import reset_for_trial, trial_start
+from ...core.params import ParamError, Params
+from ...core.physics import CONTINUE, CartPole
+from ...core.task import cartpole_task
 
 # Its Observation.termination names (1 + index): the physics status that ended the trial
 TERMINATIONS = ("pole_angle", "cart_position")
@@ -18,11 +18,11 @@ def simulator(name: str, params: Params):
     """(the cart-pole, its pole's half-length and track limit in m, for a drawing). Those that
     step their own tau import their engine only when chosen."""
     if name == "gymnasium":
-        from ..core.gym_physics import GymCartPole
+        from .gymnasium_cartpole import GymCartPole
         cartpole, engine = GymCartPole(), "gymnasium"
         limits = cartpole.env.length, cartpole.env.x_threshold
     elif name == "mujoco":
-        from ..core.mujoco_physics import MujocoCartPole
+        from .mujoco_cartpole import MujocoCartPole
         cartpole, engine = MujocoCartPole(), "MuJoCo"
         limits = cartpole.pole_length, cartpole.track_limit_m
     else:

@@ -2,7 +2,7 @@
 step and state), so that the core, the batch-engine comparison and the gymnasium environment
 node (clnn_ros/nodes/environment.py, simulator gymnasium) all drive the very same simulator.
 
-Gymnasium's own constants apply (those of GYM_PHYSICS below); the model's Params do not
+Gymnasium's own constants apply (core.physics.GYM_PHYSICS); the model's Params do not
 change them. Gymnasium keeps the state in radians (float64); the state seen by the encoder and
 published on /env/observation is in degrees: math.degrees(rad).
 
@@ -16,13 +16,8 @@ import math
 
 import numpy as np
 
-from .physics import CONTINUE, FAIL_ANGLE, FAIL_POSITION, start_in_units
-
-# Gymnasium's CartPole-v1 as Params values (gymnasium/envs/classic_control/cartpole.py: its
-# constants, true equations, explicit Euler, limits 12 deg and 2.4 m).
-GYM_PHYSICS = dict(cart_mass=1.0, pole_mass=0.1, pole_length=0.5, gravity=9.8, force=10.0,
-                   tau=0.02, physics="correct", integrator="euler", angle_limit_deg=12.0,
-                   track_limit_m=2.4)
+from ...core.physics import (CONTINUE, FAIL_ANGLE, FAIL_POSITION, GYM_PHYSICS,
+                             start_in_units)
 
 
 class GymCartPole:
@@ -30,7 +25,7 @@ class GymCartPole:
     state = (x m, x_dot m/s, theta deg, theta_dot deg/s)."""
 
     def __init__(self, params=None):  # params accepted (and unused) for CartPole's signature
-        import gymnasium  # imported here: the rest of the core does not need it
+        import gymnasium  # imported here: the rest of the project does not need it
 
         # unwrapped: no TimeLimit, the trial's cap is max_steps
         self.env = gymnasium.make("CartPole-v1").unwrapped
@@ -73,15 +68,3 @@ class GymCartPole:
     def _read_state(self) -> None:
         x, x_dot, theta, theta_dot = (float(v) for v in self.env.state)
         self.state = (x, x_dot, math.degrees(theta), math.degrees(theta_dot))
-
-
-def gym_matched_params(p):
-    """p with the core's own physics made the same model as gymnasium's CartPole-v1 (used to
-    run the batch engine on gymnasium's physics)."""
-    return p.replace(**GYM_PHYSICS)
-
-
-def gym_exact_params(p):
-    """p with the core's own physics made gymnasium's CartPole-v1 step itself, bit for bit
-    (physics "gymnasium": its float operations, in radians), with its constants."""
-    return p.replace(**{**GYM_PHYSICS, "physics": "gymnasium"})
