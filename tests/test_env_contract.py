@@ -126,17 +126,19 @@ def ros_env(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def checks(ros_env, tmp_path_factory):
-    """All checker runs at once, each in its own namespace of the module's domain (they mostly
-    wait on the node; about 40 s in all here). One still running after CHECKS_HANG_S (a bound
-    against a hang, never a speed bound) is stopped with SIGABRT: Python's faulthandler writes
-    where each of its threads stood, and that is its report (its node exits with its stdin)."""
+    """All checker runs at once, each in a namespace of its own and a domain of its own (so that
+    no checker's participant is torn down while it takes in the comings and goings of the
+    others'; they mostly wait on the node; about 40 s in all here). One still running after
+    CHECKS_HANG_S (a bound against a hang, never a speed bound) is stopped with SIGABRT: Python's
+    faulthandler writes where each of its threads stood, and that is its report (its node exits
+    with its stdin)."""
     stderr = tmp_path_factory.mktemp("checkers")
     running = {}
     for name, (command, options, _) in CHECKS.items():
         with open(stderr / name, "w") as log:
             running[name] = subprocess.Popen(
-                [PY, "-m", "clnn_ros.live.check_env", "--domain-id", DOMAIN_ID, "--namespace",
-                 f"/check_{name}", *options, *command],
+                [PY, "-m", "clnn_ros.live.check_env", "--domain-id", free_domain_id(),
+                 "--namespace", f"/check_{name}", *options, *command],
                 cwd=ROOT, env={**ros_env, "PYTHONFAULTHANDLER": "1"}, stdout=subprocess.PIPE,
                 stderr=log, text=True)
     deadline, results = time.monotonic() + CHECKS_HANG_S, {}

@@ -33,6 +33,7 @@ import os
 import sys
 import tempfile
 from pathlib import Path
+from typing import NoReturn
 
 from ..session import rosenv  # noqa: F401  (loopback DDS discovery by default, before rclpy loads)
 
@@ -53,7 +54,7 @@ def namespace_argument(text: str) -> str:
     return "/" + text.strip("/")
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None) -> NoReturn:
     parser = OneLineArgumentParser(prog="python -m clnn_ros.live.check_env",
                                    name="check_env_node", description=__doc__.split("\n\n")[0])
     parser.add_argument("--domain-id", type=int, default=150 + os.getpid() % 80,
@@ -108,9 +109,13 @@ def main(argv: list[str] | None = None) -> int:
                                     args.startup_timeout, params_file, env),
                               run, strict_physics=args.physics_from_run)
     ok = findings.report()
-    print(f"check_env_node: {'all rules pass' if ok else 'the node breaks the contract'}")
-    return 0 if ok else 1
+    print(f"check_env_node: {'all rules pass' if ok else 'the node breaks the contract'}",
+          flush=True)
+    # The verdict is out and the node stopped: the process ends here, without deleting its DDS
+    # participant, which Fast DDS 2.14 can deadlock on (check_env/probe.py, Probe.session).
+    sys.stderr.flush()
+    os._exit(0 if ok else 1)
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    main()
