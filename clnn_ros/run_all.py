@@ -182,7 +182,11 @@ def graph_namespace(args) -> str:
 def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
     """The run's values (graph.run.run_values), checked before any node starts. Defaults: the
     demonstration's, or a resumed checkpoint's seed and parameters; then the preset, the params
-    file, the options and the flags."""
+    file, the options and the flags. An --env not given is the cart-pole, or the resumed
+    checkpoint's Gymnasium task (set on `args`, which the run goes on with)."""
+    if args.env is None:
+        resumed = checkpoint.params.task if checkpoint else CARTPOLE
+        args.env = resumed if resumed.startswith(PREFIX) else "cartpole"
     options = {}
     for item in args.option:
         key, sep, value = item.partition("=")
@@ -243,9 +247,6 @@ def main(argv=None) -> int:
             raise ParamError(problem)
         checkpoint = load_checkpoint(args.init_weights) \
             if args.init_weights and args.init_weights.endswith(".npz") else None
-        if args.env is None:
-            resumed = checkpoint.params.task if checkpoint else CARTPOLE
-            args.env = resumed if resumed.startswith(PREFIX) else "cartpole"
         values = build_parameters(args, checkpoint)
     except ParamError as error:  # a CheckpointError too
         print(f"run_all: error: {error}", file=sys.stderr)
