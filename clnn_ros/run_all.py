@@ -179,14 +179,20 @@ def graph_namespace(args) -> str:
     return "/" + args.namespace.strip("/") if args.namespace else "/"
 
 
+def environment_of(args, checkpoint: Checkpoint | None = None) -> str:
+    """The run's --env: the one given, else the resumed checkpoint's Gymnasium task, else the
+    cart-pole."""
+    if args.env is not None:
+        return args.env
+    resumed = checkpoint.params.task if checkpoint else CARTPOLE
+    return resumed if resumed.startswith(PREFIX) else "cartpole"
+
+
 def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
     """The run's values (graph.run.run_values), checked before any node starts. Defaults: the
     demonstration's, or a resumed checkpoint's seed and parameters; then the preset, the params
-    file, the options and the flags. An --env not given is the cart-pole, or the resumed
-    checkpoint's Gymnasium task (set on `args`, which the run goes on with)."""
-    if args.env is None:
-        resumed = checkpoint.params.task if checkpoint else CARTPOLE
-        args.env = resumed if resumed.startswith(PREFIX) else "cartpole"
+    file, the options and the flags; the environment: environment_of's."""
+    env = environment_of(args, checkpoint)
     options = {}
     for item in args.option:
         key, sep, value = item.partition("=")
@@ -208,28 +214,28 @@ def build_parameters(args, checkpoint: Checkpoint | None = None) -> dict:
     if args.init_weights:  # the nodes get a file by its full path
         flags["init_weights"] = args.init_weights if args.init_weights in OPTIMAL else \
             str(Path(args.init_weights).resolve())
-    defaults = {**gymnasium_task.graph_defaults(args.env, DEMO, args.actions),
+    defaults = {**gymnasium_task.graph_defaults(env, DEMO, args.actions),
                 **(checkpoint_values(checkpoint) if checkpoint else {})}
-    if args.preset is not None and args.env_node is None and args.env != "external":
-        check_preset_task(args.preset, args.env if args.env.startswith(PREFIX) else CARTPOLE)
-    if args.env_node is None and args.env in SIMULATORS:
-        flags["simulator"] = args.env
+    if args.preset is not None and args.env_node is None and env != "external":
+        check_preset_task(args.preset, env if env.startswith(PREFIX) else CARTPOLE)
+    if args.env_node is None and env in SIMULATORS:
+        flags["simulator"] = env
     values, params = run_values(defaults, args.preset, args.params_file, options, flags)
-    if params.task != CARTPOLE and args.env in SIMULATORS and args.env_node is None:
+    if params.task != CARTPOLE and env in SIMULATORS and args.env_node is None:
         raise ParamError(f"task {params.task} needs its own environment: --env {PREFIX}ID, or "
-                         f"--env-node / --env external for one of yours (--env {args.env}: the "
+                         f"--env-node / --env external for one of yours (--env {env}: the "
                          f"cart-pole)")
-    own_tau = OWN_TAU.get(args.env)
+    own_tau = OWN_TAU.get(env)
     if own_tau is not None and args.env_node is None and params.tau != own_tau:
-        raise ParamError(f"--env {args.env} steps {args.env}'s tau of {own_tau:g} s, got "
+        raise ParamError(f"--env {env} steps {env}'s tau of {own_tau:g} s, got "
                          f"tau={params.tau:g}")
     if args.velocity_edge is not None and "cart_velocity" not in params.state_vars:
         raise ParamError(f"--velocity-edge needs cart_velocity among the state variables "
                          f"(this run encodes {','.join(params.state_vars)})")
     # what each node will do with init_weights, here first: one line for what does not fit
     if episode_start(values.get("init_weights", ""), values["seed"], params).resume \
-            and args.env.startswith(PREFIX) and args.env_node is None:
-        gymnasium_task.check_resumable(args.env)
+            and env.startswith(PREFIX) and args.env_node is None:
+        gymnasium_task.check_resumable(env)
     return values
 
 
@@ -251,6 +257,7 @@ def main(argv=None) -> int:
     except ParamError as error:  # a CheckpointError too
         print(f"run_all: error: {error}", file=sys.stderr)
         return 2
+    args.env = environment_of(args, checkpoint)  # what the rest of the run reads
     namespace = graph_namespace(args)
     environment = None if args.env == "external" else args.env
     env_command = None

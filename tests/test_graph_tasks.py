@@ -5,8 +5,10 @@ weights, one task of each family Gymnasium builds differently (classic control, 
 from __future__ import annotations
 
 import csv
+import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,6 +21,7 @@ from conftest import free_domain_id, ros_environment
 pytestmark = pytest.mark.ros
 DOMAIN_ID = free_domain_id()
 HANG_S = 600  # a bound against a hang, never a speed bound
+UNKNOWN_TASK = "gymnasium:nan_task:NanObservation-v0"  # registered by tests/nan_task.py
 
 
 @pytest.fixture(scope="module")
@@ -81,3 +84,30 @@ def test_a_task_without_its_environment_is_refused_in_one_line(ros_env):
     result = run_all(ros_env, "--option", "task=gymnasium:Acrobot-v1", "--trials", "1")
     assert result.returncode == 2 and result.stdout == ""
     assert result.stderr.count("\n") == 1 and "needs its own environment" in result.stderr
+
+
+def with_nan_task(ros_env) -> dict:
+    """The environment of a run whose processes can import tests/nan_task.py (Gymnasium imports
+    the module an ID names)."""
+    path = [str(Path(__file__).parent), *filter(None, [ros_env.get("PYTHONPATH")])]
+    return {**ros_env, "PYTHONPATH": os.pathsep.join(path)}
+
+
+def test_an_unknown_task_runs_and_its_broken_observation_is_named(ros_env, tmp_path):
+    """A task that KNOWN does not name runs with the edges the user gives; at its third step its
+    observation turns to NaN: the environment node refuses it in one line and exits 1, and the
+    run's last line says so and names it."""
+    result = run_all(with_nan_task(ros_env), "--env", UNKNOWN_TASK, "--option",
+                     "variable_edges=x0:0;x1:0", "--trials", "2", "--no-record", "--out",
+                     str(tmp_path))
+    assert result.returncode == 1, result.stderr
+    assert result.stderr.strip().splitlines()[-1] == (
+        f"run_all: error: tick 3: {UNKNOWN_TASK}: an observation must be 2 finite numbers, "
+        f"got [nan, nan] (node 'environment' exited with status 1)")
+
+
+def test_an_unknown_task_without_its_edges_is_refused_in_one_line(ros_env):
+    result = run_all(with_nan_task(ros_env), "--env", UNKNOWN_TASK, "--trials", "2")
+    assert result.returncode == 2 and result.stdout == ""
+    assert result.stderr.count("\n") == 1
+    assert "state_vars: unknown 'x0'" in result.stderr and "variable_edges" in result.stderr

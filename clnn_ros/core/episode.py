@@ -120,7 +120,7 @@ class EpisodeResult:
     seed: int
     initial_angles: np.ndarray  # (trials,) deg: each trial's first pole angle
     steps: np.ndarray  # (trials,) successful steps
-    end_status: np.ndarray  # (trials,) physics status that ended the trial (CONTINUE = reached the cap)
+    end_status: np.ndarray  # (trials,) physics status that ended it (CONTINUE: reached the cap)
     final_weights: np.ndarray
     checkpoint: Checkpoint | None = None  # the state after the last trial: resume from it
 
@@ -188,8 +188,8 @@ def run_episode(seed: int, p: Params, weights: np.ndarray | None = None, learn: 
                 resume: Checkpoint | None = None) -> EpisodeResult:
     """One episode with the seed protocol; `weights`/`angles` override the seed's own (`angles`:
     the paper's starts at these angles, deg); `env_factory(p)` makes the environment (e.g.
-    tasks.cartpole.gymnasium_cartpole.GymCartPole); `resume` continues a checkpoint with the seed's remaining
-    trials (up to p.trials)."""
+    tasks.cartpole.gymnasium_cartpole.GymCartPole); `resume` continues a checkpoint with the
+    seed's remaining trials (up to p.trials)."""
     agent, counter, first_trial = start_episode(seed, p, weights, resume)
     starts, in_radians = trial_starts(seed, p, angles)
     if angles is None:

@@ -86,10 +86,7 @@ class Task:
         where the result does not fit the task."""
         p = base or Params()
         if self.name != CARTPOLE:
-            own = dict(task=self.name, n_actions=len(self.actions),
-                       reward_mapping=REWARD_MAPPING_OF[self.ends_in])
-            p = p.replace(**own, **({} if self.max_steps is None else
-                                    {"max_steps": self.max_steps}))
+            p = p.replace(**self.own_values())
         p = params_from_strings(values or {}, p)
         if self.name != CARTPOLE and all(v in STATE_NAMES for v in p.state_vars):
             edged = {name for name, _ in p.variable_edges}
@@ -102,6 +99,13 @@ class Task:
             p = p.replace(state_vars=self.names)
         self.check(p)
         return p
+
+    def own_values(self) -> dict:
+        """The values a task sets whatever it encodes: its name, its actions' count, its
+        truncation and the reward mapping of how its episodes end."""
+        return dict(task=self.name, n_actions=len(self.actions),
+                    reward_mapping=REWARD_MAPPING_OF[self.ends_in],
+                    **({} if self.max_steps is None else {"max_steps": self.max_steps}))
 
     def check(self, p: Params) -> None:
         """ParamError with one line where p is not for this task."""

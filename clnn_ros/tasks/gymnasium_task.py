@@ -215,16 +215,19 @@ class GymnasiumTaskEnvironment:
             raise ParamError(f"task {self.task.name} has {len(self.task.actions)} actions "
                              f"({', '.join(self.task.action_labels)}); n_actions is "
                              f"{params.n_actions}")
-        self.next_trial = 0  # the trial whose start the environment's next reset() draws
+        self._next_draw = None  # (seed, trial) whose start the environment's next reset() draws
 
     def start(self, seed: int, trial: int, _initial_angle_deg: float) -> np.ndarray:
-        if trial != self.next_trial and trial > 0:  # a resumed episode
-            check_resumable(self.task.name)
-            self.env.reset(STARTS_SEED + seed)
-            for _ in range(trial - 1):
-                self.env.reset(None)
-        self.next_trial = trial + 1
-        return self.env.reset(STARTS_SEED + seed if trial == 0 else None)
+        if (seed, trial) == self._next_draw:
+            observation = self.env.reset(None)
+        else:  # a new episode, or a resumed one: its seeded reset and one more per trial before
+            if trial > 0:
+                check_resumable(self.task.name)
+            observation = self.env.reset(STARTS_SEED + seed)
+            for _ in range(trial):
+                observation = self.env.reset(None)
+        self._next_draw = (seed, trial + 1)
+        return observation
 
     def step(self, action: int) -> tuple:
         return (*self.env.step(action), 0)
@@ -245,12 +248,11 @@ def graph_defaults(environment: str, defaults: dict, actions: str | None) -> dic
 
 def run_values(task_name: str, actions: str | None = None) -> dict:
     """The values of a graph run of `gymnasium:ID` (its parameters' layer under the user's):
-    the task's name, its actions, truncation and reward mapping, and the known task's first
-    encoding (every variable encoded where it has none); ParamError as make()."""
+    the task's name, its actions, truncation and reward mapping, every variable encoded, and
+    the known task's first encoding (an unknown task's edges are the user's to give: the run's
+    check says so); ParamError as make()."""
     task, _ = make(task_name, actions)
-    p = task_params(task)
-    values = {"task": task.name, "n_actions": p.n_actions, "reward_mapping": p.reward_mapping,
-              "max_steps": p.max_steps, "state_vars": ",".join(p.state_vars),
-              "variable_edges": variable_edges_text(p.variable_edges)}
+    values = {"max_steps": Params().max_steps, **task.own_values(),
+              "state_vars": ",".join(task.names)}
     known = KNOWN.get(env_id(task_name))
     return {**values, **dict(known.defaults if known else ()), "actions": actions or ""}
