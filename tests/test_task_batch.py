@@ -4,6 +4,7 @@ for bit."""
 
 from __future__ import annotations
 
+import csv
 import importlib.util
 import json
 import random
@@ -12,7 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from clnn_ros.core.encoder import Encoder
 from clnn_ros.core.episode import seed_setup
+from clnn_ros.core.rule import Rule
 from clnn_ros.core.task_episode import run_task_episode
 from clnn_ros.task_batch import compiles, run_compiled_task_episode
 from clnn_ros.tasks import compiled
@@ -124,13 +127,18 @@ def test_run_all_refuses_another_tasks_preset_in_one_line():
             run_all.build_parameters(run_all.parse_args([*argv, "--no-record"]))
 
 
+def load_script(name: str):
+    path = Path(__file__).parents[1] / "scripts" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def test_the_preset_search_draws_distinct_candidates_and_ranks_solving_first():
     """scripts/task_search.py: a fixed draw of distinct candidates of each task's space (all of
     them valid Params for the task), ranked by seeds solved, then fewer steps to solve."""
-    path = Path(__file__).parents[1] / "scripts" / "task_search.py"
-    spec = importlib.util.spec_from_file_location("task_search", path)
-    search = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(search)
+    search = load_script("task_search")
     for task_name, space in search.SPACES.items():
         drawn = search.candidates(space, 12, random.Random(46))
         assert len(drawn) == 12 and all(drawn.count(c) == 1 for c in drawn)
@@ -141,3 +149,45 @@ def test_the_preset_search_draws_distinct_candidates_and_ranks_solving_first():
     rows = [[8, 3, "200", "30000", "-150.0", "-120.0"], [8, 5, "300", "40000", "-140.0", "-110.0"],
             [8, 5, "250", "35000", "-130.0", "-105.0"], [8, 0, "-", "-", "-100.0", "-90.0"]]
     assert sorted(range(4), key=lambda k: search.rank(rows[k])) == [2, 1, 0, 3]
+
+
+@pytest.mark.parametrize("task_name, actions, edges", [
+    ("gymnasium:MountainCar-v0", None, "position:-0.9,-0.5,-0.2;velocity:-0.005,0,0.005"),
+    ("gymnasium:InvertedPendulum-v5", "-1,1", "hinge_angle:-0.01,0,0.01;slider_velocity:0"),
+])
+def test_a_table_written_into_weights_is_what_the_network_plays(task_name, actions, edges):
+    """scripts/encoding_capacity.py: any table pattern -> action, written into the weights (with
+    spare segments too), is read back by the core's inference pattern for pattern."""
+    capacity = load_script("encoding_capacity")
+    task, _ = make(task_name, actions)
+    names = ",".join(part.split(":")[0] for part in edges.split(";"))
+    p = task_params(task, {"state_vars": names, "variable_edges": edges})
+    _, _, offsets = Encoder.from_params(p, task.names, task.units).arrays
+    radix = [int(b - a) for a, b in zip(offsets, [*offsets[1:], p.n_inputs])]
+    rng = np.random.default_rng(46)
+    for spare in (0, 5):
+        table = tuple(int(a) for a in rng.integers(0, p.n_actions, int(np.prod(radix))))
+        weights = capacity.table_weights(table, radix, offsets, p.n_actions, p.n_inputs,
+                                         p.w_max, len(table) + spare)
+        assert capacity.played_table(weights, radix, offsets, Rule.from_params(p)) == table
+
+
+def test_the_encoding_capacity_finds_acrobots_policy_and_refuses_a_bad_table(tmp_path, capsys):
+    """Acrobot-v1 with theta1_dot cut at 0: of its 9 tables the best is the one every seed of
+    the preset learns (theta1_dot < 0: torque +1, else -1: actions 2, 0), above the threshold;
+    and a --start that is no table of the encoding is one line and exit 2."""
+    capacity = load_script("encoding_capacity")
+    argv = ["gymnasium:Acrobot-v1", "--state-vars", "theta1_dot", "--edges", "theta1_dot:0",
+            "--episodes", "5", "--preset", "acrobot_v1", "--learn", "20", "--learn-seeds",
+            "128-129", "--csv", str(tmp_path / "capacity.csv")]
+    assert capacity.main(argv) == 0
+    with open(tmp_path / "capacity.csv") as f:
+        row = next(csv.DictReader(f))
+    assert row["search"] == "every table" and row["best table"] == "20"
+    assert float(row["best mean return"]) >= -100 > float(row["one change away: best"])
+    assert row["from the best table: last 100"] != "" and row["learning seeds"] == "2"
+    capsys.readouterr()
+    assert capacity.main([*argv[:5], "--start", "7"]) == 2
+    error = capsys.readouterr().err
+    assert error.startswith("encoding_capacity: error: --start 7: a table is 2 actions")
+    assert error.count("\n") == 1
