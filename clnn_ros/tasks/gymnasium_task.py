@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.episode import STARTS_SEED
-from ..core.params import ParamError, Params, variable_edges_text
+from ..core.params import ParamError, Params
 from ..core.task import Action, Task, Variable
 
 PREFIX = "gymnasium:"
