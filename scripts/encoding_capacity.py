@@ -10,8 +10,9 @@ policies it admits are the tables pattern -> action. Each table is written into 
 network with one segment per pattern (weight w_max on the pattern's inputs, 0 elsewhere: only
 that segment responds fully), and the task batch engine plays it frozen from the task's own
 starts (clnn_ros.task_batch, learn off). The search: every table where there are few, else
-hill climbing (change one pattern's action while the mean return grows) from random tables.
-If the best table stays under the task's threshold, no rule can solve the task in this encoding.
+hill climbing (change one pattern's action while the mean return grows) from random tables or
+a given one. Where every table was played and none reaches the task's threshold, no rule can
+solve the task in this encoding (on these starts); a climb's best is a lower bound only.
 Also measured: the tables one change away from the best (their median and best mean return),
 how sharp its peak is. Prints one line per encoding, appended to --csv where given.
 """
