@@ -102,8 +102,7 @@ def main(argv=None) -> int:
     except (ParamError, ValueError) as error:
         print(f"encoding_capacity: error: {error}", file=sys.stderr)
         return 2
-    played = task_params(task, {"state_vars": args.state_vars, "variable_edges": args.edges,
-                                "segments": str(n_patterns), "trials": str(args.episodes)})
+    played = p.replace(segments=n_patterns, trials=args.episodes)
 
     def mean_return(table: tuple) -> float:
         weights = table_weights(table, radix, offsets, n_actions, n_inputs, played.w_max)
