@@ -23,9 +23,9 @@ from .batch import STALE, drop_stale_cache
 from .core.encoder import Encoder, encode_active
 from .core.episode import STARTS_SEED, seed_setup
 from .core.params import Params
-from .core.rln import (NEVER, NONE, TIE_RANDOM, Rule, explore, infer, outcome, rerandomize,
-                       response_space, restart_counters, tag_action_path, trial_start_count,
-                       update)
+from .core.rln import (NEVER, NONE, TIE_RANDOM, Rule, explore, infer, rerandomize,
+                       response_space, restart_counters, tag_action_path, task_outcome,
+                       trial_start_count, update)
 from .core.task import Task
 from .core.task_episode import TaskEpisodeResult
 from .tasks import classic_control, compiled, mujoco_control
@@ -61,7 +61,7 @@ def _episode(task, sim, forces, weights, starts, n_values, components, edges, of
         restart_counters(punish_tagged_at, reward_tagged_at, eligible, rule)
         if learn and rerandomize(weights, trial, rule, rng):
             decisions[:, 0] = STALE
-        successes = trial_start_count(successes, rule)
+        successes, window = trial_start_count(successes, rule), 0.0
         state[:] = starts[trial]
         compiled.begin(task, state, sim)
         compiled.observe(task, state, sim, values)
@@ -81,7 +81,8 @@ def _episode(task, sim, forces, weights, starts, n_values, components, edges, of
             reward, terminated = compiled.step(task, state, sim, forces, neuron)
             compiled.observe(task, state, sim, values)
             total += reward
-            kind, successes = outcome(successes, terminated, rule)
+            kind, successes, window = task_outcome(successes, window, terminated, reward,
+                                                   rule)
             if learn:
                 now = update(kind, weights, punish_tagged_at, reward_tagged_at, eligible, active,
                              now, rule)

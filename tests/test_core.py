@@ -102,7 +102,7 @@ def test_reward_update_by_hand():
     kinds = []
     for _ in range(4):
         assert agent.act(spikes)[0] == 1
-        kinds.append(counter.outcome(terminated=False))
+        kinds.append(counter.outcome(terminated=False, reward=1.0))
         agent.learn(kinds[-1])
     assert kinds == [NONE, NONE, NONE, REWARD]
     # only segment (1, 2) was on the path; c+ = sigma at the head: +0.25*4/4 where e = 1,
@@ -152,10 +152,10 @@ def test_tagging_marks_the_action_path_or_both_neurons(tagging, tagged):
 def test_success_counter_per_trial_or_carried(success_counter, second_trial_kinds):
     counter = SuccessCounter(Params(sigma=3, success_counter=success_counter))
     counter.begin_trial()
-    assert [counter.outcome(terminated=False) for _ in range(2)] == [NONE, NONE]
-    assert counter.outcome(terminated=True) == PUNISH
+    assert [counter.outcome(False, 1.0) for _ in range(2)] == [NONE, NONE]
+    assert counter.outcome(True, 1.0) == PUNISH
     counter.begin_trial()
-    assert [counter.outcome(terminated=False) for _ in range(3)] == second_trial_kinds  # 2 carried
+    assert [counter.outcome(False, 1.0) for _ in range(3)] == second_trial_kinds  # 2 carried
 
 
 def test_weights_saturate_at_zero_and_wmax():

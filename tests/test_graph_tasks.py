@@ -37,9 +37,9 @@ def run_all(env, *args) -> subprocess.CompletedProcess:
 @pytest.mark.parametrize("task_name, options, composed", [
     ("gymnasium:Acrobot-v1", [], False),
     ("gymnasium:Acrobot-v1", [], True),
-    ("gymnasium:LunarLander-v3", [], False),
+    ("gymnasium:LunarLander-v3", ["--option", "reward_mapping=shaped"], False),
     ("gymnasium:InvertedPendulum-v5", ["--actions=-1,1"], False),
-], ids=["acrobot", "acrobot-composed", "lunarlander", "invertedpendulum"])
+], ids=["acrobot", "acrobot-composed", "lunarlander-shaped", "invertedpendulum"])
 def test_a_gymnasium_task_in_the_graph_equals_the_core(ros_env, tmp_path, task_name, options,
                                                        composed):
     trials, max_steps, seed = 4, 150, 3
@@ -47,9 +47,12 @@ def test_a_gymnasium_task_in_the_graph_equals_the_core(ros_env, tmp_path, task_n
                      str(trials), "--max-steps", str(max_steps), "--no-record", "--out",
                      str(tmp_path), *(["--composed"] if composed else []))
     assert result.returncode == 0, result.stderr
-    task, env = make(task_name, options[0].split("=")[1] if options else None)
+    actions = next((o.split("=")[1] for o in options if o.startswith("--actions=")), None)
+    changes = dict(o.split("=", 1) for o, before in zip(options[1:], options) if before == "--option")
+    task, env = make(task_name, actions)
     core = run_task_episode(seed, task_params(task, {"trials": str(trials),
-                                                     "max_steps": str(max_steps)}), task, env)
+                                                     "max_steps": str(max_steps), **changes}),
+                            task, env)
     with open(tmp_path / "trials.csv") as f:
         rows = list(csv.DictReader(f))
     # the graph counts a trial's successful steps: those that did not terminate it

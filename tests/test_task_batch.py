@@ -69,6 +69,7 @@ def test_a_compiled_step_is_gymnasiums_bit_for_bit(name):
     ("gymnasium:Acrobot-v1", {"reward_mapping": "failure", "inference": "exact",
                               "decay_counters": "carry", "success_counter": "carry",
                               "punish_timing": "after_decay", "tie_break": "index"}),
+    ("gymnasium:Acrobot-v1", {"reward_mapping": "shaped"}),
     ("gymnasium:MountainCar-v0", {}),
     ("gymnasium:MountainCar-v0", {"omega": "16", "variable_edges": "position:-0.5;velocity:0",
                                   "segments": "2"}),

@@ -71,12 +71,40 @@ def test_tagging_both_neurons_tags_every_neurons_winner_with_k_neurons():
 
 def test_the_goal_mapping_rewards_the_goal_and_punishes_every_omega_steps_without_it():
     counter = SuccessCounter(Params(reward_mapping="goal", omega=3, sigma=2))
-    kinds = [counter.outcome(terminated=False) for _ in range(7)]
+    kinds = [counter.outcome(False, -1.0) for _ in range(7)]
     assert kinds == [NONE, NONE, PUNISH, NONE, NONE, PUNISH, NONE]
-    assert counter.outcome(terminated=True) == REWARD
+    assert counter.outcome(True, -1.0) == REWARD
     paper = SuccessCounter(Params(omega=3, sigma=2))
-    assert [paper.outcome(terminated=False) for _ in range(4)] == [NONE, REWARD, NONE, REWARD]
-    assert paper.outcome(terminated=True) == PUNISH
+    assert [paper.outcome(False, 1.0) for _ in range(4)] == [NONE, REWARD, NONE, REWARD]
+    assert paper.outcome(True, 1.0) == PUNISH
+
+
+def test_the_shaped_mapping_signals_the_sign_of_the_rewards_since_the_last_signal():
+    counter = SuccessCounter(Params(task="gymnasium:LunarLander-v3", n_actions=4,
+                                    reward_mapping="shaped", sigma=3, omega=100))
+    counter.begin_trial()
+    rewards = [2.0, -1.0, 0.5,  -3.0, 1.0, 1.0,  0.25, -0.25, 0.0,  5.0, -100.0]
+    kinds = [counter.outcome(False, r) for r in rewards[:-1]]
+    assert kinds == [NONE, NONE, REWARD, NONE, NONE, PUNISH, NONE, NONE, NONE, NONE]
+    assert counter.outcome(True, rewards[-1]) == PUNISH  # 5 - 100: a crash after a good step
+    counter.begin_trial()  # a trial starts with nothing summed
+    assert counter.outcome(False, -1.0) == NONE
+    counter.begin_trial()
+    assert counter.outcome(True, 100.0) == REWARD  # a landing
+    counter.begin_trial()
+    assert counter.outcome(True, 0.0) == PUNISH  # an end that gained nothing is no success
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"success_counter": "carry"}, "reward_mapping shaped sums each trial's own rewards: "
+                                   "success_counter must be per_trial"),
+    ({"task": "cartpole", "n_actions": 2}, "reward_mapping shaped reads a task's rewards, and "
+                                           "the cart-pole's are 1 on every step: use failure")])
+def test_the_shaped_mapping_is_refused_where_it_cannot_read_a_trials_rewards(changes, message):
+    with pytest.raises(ParamError) as error:
+        Params(**{"task": "gymnasium:LunarLander-v3", "n_actions": 4,
+                  "reward_mapping": "shaped", **changes})
+    assert str(error.value) == message
 
 
 @pytest.mark.parametrize("changes, message", [

@@ -11,7 +11,7 @@ import numpy as np
 
 from .params import Params
 from .rln import (NEVER, NONE, REWARD, TIE_RANDOM, Rule, counter_value, explore, infer,
-                  outcome, rerandomize, response_space, restart_counters, tag_action_path,
+                  rerandomize, response_space, restart_counters, tag_action_path, task_outcome,
                   trial_start_count, update)
 
 NO_INPUTS = np.zeros(0, dtype=np.int64)
@@ -19,19 +19,23 @@ NO_INPUTS = np.zeros(0, dtype=np.int64)
 
 class SuccessCounter:
     """Counts successful steps; signals a positive reward every sigma of them and a punishment on
-    failure (the paper's 1-hot reward R; reward_mapping="goal": core.rln.outcome)."""
+    failure (the paper's 1-hot reward R; reward_mapping="goal" or "shaped":
+    core.rln.task_outcome)."""
 
     def __init__(self, params: Params):
         self.rule = Rule.from_params(params)
         self.count = 0
+        self.window = 0.0  # reward_mapping="shaped": the rewards' sum since the last signal
 
     def begin_trial(self) -> None:
         self.count = trial_start_count(self.count, self.rule)
+        self.window = 0.0
 
-    def outcome(self, terminated: bool) -> int:
+    def outcome(self, terminated: bool, reward: float) -> int:
         """The reward kind for a step's outcome (whether it terminated the episode: the
-        cart-pole's failure): PUNISH, REWARD or NONE."""
-        kind, self.count = outcome(self.count, terminated, self.rule)
+        cart-pole's failure; the task's reward for it): PUNISH, REWARD or NONE."""
+        kind, self.count, self.window = task_outcome(self.count, self.window, terminated,
+                                                     float(reward), self.rule)
         return kind
 
 

@@ -141,7 +141,7 @@ def play_trial(agent: RLNAgent, counter: SuccessCounter, encoder: Encoder, obser
         action, _ = agent.act(encoder.spikes(observation))
         observation, reward, terminated, truncated = step(action)
         total += reward
-        kind = counter.outcome(terminated)
+        kind = counter.outcome(terminated, reward)
         if learn:
             agent.learn(kind)
         steps += 1

@@ -14,8 +14,10 @@ PROTOCOLS = ("paper", "gymnasium")
 # What the rule's reward and punishment mean for a task (core.rln.outcome): "failure", the
 # paper's, for a task whose episode terminates in failure (a reward every sigma successful
 # steps, a punishment when it terminates); "goal", for one whose episode terminates in success
-# (reaching a goal: a reward when it terminates, a punishment every omega steps without it).
-REWARD_MAPPINGS = ("failure", "goal")
+# (reaching a goal: a reward when it terminates, a punishment every omega steps without it);
+# "shaped", for one whose every step's reward says how well it goes (LunarLander-v3): every
+# sigma steps, and when a step terminates the episode, the sign of the rewards' sum since.
+REWARD_MAPPINGS = ("failure", "goal", "shaped")
 CARTPOLE = "cartpole"  # Params.task of the paper's cart-pole and its variants
 MAX_ACTIONS = 255  # Action.action is a uint8 (255: ACTION_NONE, so at most 255 actions)
 GYMNASIUM_MAX_STEPS = 500  # CartPole-v1 truncates an episode at 500 steps
@@ -168,6 +170,12 @@ class Params:
         _choice("punish_timing", self.punish_timing, PUNISH_TIMING)
         _choice("inference", self.inference, INFERENCE)
         _choice("reward_mapping", self.reward_mapping, REWARD_MAPPINGS)
+        if self.reward_mapping == "shaped" and self.success_counter != "per_trial":
+            raise ParamError("reward_mapping shaped sums each trial's own rewards: "
+                             "success_counter must be per_trial")
+        if self.reward_mapping == "shaped" and self.task == CARTPOLE:
+            raise ParamError("reward_mapping shaped reads a task's rewards, and the cart-pole's "
+                             "are 1 on every step: use failure")
         if not isinstance(self.task, str) or not self.task.strip():
             raise ParamError(f"task must be a task's name, e.g. {CARTPOLE!r}, got {self.task!r}")
         if isinstance(self.n_actions, bool) or not isinstance(self.n_actions, int) \

@@ -295,3 +295,24 @@ def outcome(count, terminated, rule):
     if count == rule.sigma:
         return REWARD, 0
     return NONE, count
+
+
+@tick_kernel
+def task_outcome(count, window, terminated, reward, rule):
+    """(reward kind, new count, new window) for a step of a task that gives a reward each
+    step: outcome()'s, or with reward_mapping="shaped" (a task whose rewards say how well it
+    goes): the window sums the rewards of the steps since the last signal; a step that
+    terminates the episode REWARDs if it is positive and PUNISHes otherwise, and every sigma-th
+    step REWARDs if it is positive and PUNISHes if it is negative; then both restart."""
+    if rule.reward_shaped:
+        window += reward
+        count += 1
+        if terminated or count == rule.sigma:
+            if window > 0:
+                return REWARD, 0, 0.0
+            if window < 0 or terminated:
+                return PUNISH, 0, 0.0
+            return NONE, 0, 0.0
+        return NONE, count, window
+    kind, count = outcome(count, terminated, rule)
+    return kind, count, window

@@ -40,6 +40,7 @@ class Rule(NamedTuple):
     w_base: float
     rerandomize_range: float
     reward_on_goal: bool  # reward_mapping="goal"
+    reward_shaped: bool  # reward_mapping="shaped"
 
     @classmethod
     def from_params(cls, p: Params) -> "Rule":
@@ -49,4 +50,5 @@ class Rule(NamedTuple):
                    p.success_counter == "per_trial", p.inference == "ceiled",
                    int(p.punish_timing == "after_decay"), p.decay_counters == "per_trial",
                    float(p.explore), int(p.rerandomize_every), float(p.rerandomize_fraction),
-                   float(p.w_base), float(p.rerandomize_range), p.reward_mapping == "goal")
+                   float(p.w_base), float(p.rerandomize_range), p.reward_mapping == "goal",
+                   p.reward_mapping == "shaped")

@@ -62,8 +62,9 @@ NODE_PARAMETERS = {
     "environment": (*COMMON, *PHYSICS_PARAMETERS, "max_steps", "marker_period_ticks",
                     "simulator", "segments", "protocol", "task", "n_actions", "actions"),
     "encoder": (*COMMON, *ENCODING, *STATE_RULE, "n_actions"),
-    "reward": (*COMMON, *STATE_RULE, "sigma", "omega", "success_counter", "reward_mapping",
-               *RESUME),
+    # task: what its rewards mean (a cart-pole's are refused by reward_mapping shaped)
+    "reward": (*COMMON, *STATE_RULE, "task", "sigma", "omega", "success_counter",
+               "reward_mapping", *RESUME),
     # every model parameter: its checkpoints hold the whole episode's (a resume runs under the
     # saving run's protocol, max_steps, physics, not under defaults)
     "agent": (*COMMON, *dict.fromkeys((*NETWORK, *LEARNING, *Params().to_dict())), *RESUME,
@@ -153,8 +154,9 @@ DESCRIPTIONS = {
                   (2, MAX_ACTIONS)),
     "reward_mapping": ("failure: a reward every sigma successful steps, a punishment when the "
                        "episode terminates (the paper's); goal: a reward when it terminates (a "
-                       "goal reached), a punishment every omega steps without it",
-                       REWARD_MAPPINGS),
+                       "goal reached), a punishment every omega steps without it; shaped: the sign of the "
+                       "task's rewards summed since the last signal, every sigma steps and when "
+                       "the episode terminates", REWARD_MAPPINGS),
     "variable_edges": ("encoder: another task's variables and their interior edges, "
                        "name:e1,e2;name2:e1 ('' for the cart-pole)", None),
     "seed": ("the episode's seed: initial weights, initial angles", (0, 2**32 - 1)),

@@ -2,7 +2,8 @@
 reward R by the run's reward_mapping: the paper's ("failure"), [0,1] punishment when the step
 terminated, [1,0] a positive reward every sigma successful steps, [0,0] otherwise; "goal" (a task
 that terminates at its goal), a reward when it terminates, a punishment every omega steps
-without it. It also tells the agent when the trial is over (terminated or truncated).
+without it; "shaped" (a task whose rewards say how well it goes), the sign of the observations'
+rewards summed since the last signal, every sigma steps and when a step terminates. It also tells the agent when the trial is over (terminated or truncated).
 
     python -m clnn_ros.nodes.reward --ros-args -p sigma:=256
 
@@ -59,7 +60,7 @@ class RewardNode(Node):
             self.counter.begin_trial()
             kind = NONE
         else:
-            kind = self.counter.outcome(msg.terminated)
+            kind = self.counter.outcome(msg.terminated, msg.reward)
         out = self.reward_msg
         out.tick, out.trial, out.reward_one_hot = msg.tick, msg.trial, ONE_HOT[kind]
         out.success_counter = self.counter.count
