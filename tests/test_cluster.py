@@ -6,6 +6,7 @@ line. The store and the unit split are tested without Ray as well."""
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import ipaddress
 import os
@@ -242,6 +243,58 @@ def test_a_local_head_that_ray_gave_up_on_is_started_again(tmp_path, failures, s
         shutil.rmtree(logs)  # kept for the user, who is told where
     assert head.process is None
     assert set(Path(tempfile.gettempdir()).glob("clnn_ray_*")) == before
+
+
+def head_processes(temp_dir: str) -> dict[str, int]:
+    """{program name: pid} of the processes of a Ray head started in `temp_dir`."""
+    found = {}
+    for pid in (int(p) for p in os.listdir("/proc") if p.isdigit()):
+        try:
+            command = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        if any(temp_dir.encode() in part for part in command):
+            found[os.path.basename(command[0].decode(errors="replace"))] = pid
+    return found
+
+
+@pytest.mark.cluster
+@needs_ray
+def test_a_local_head_whose_gcs_answers_late_still_starts():
+    """A loaded machine can keep a new head's GCS from answering for seconds; Ray's own client
+    gives up after 5 s by default (gcs_rpc_server_connect_timeout_s), which ended a suite run on
+    a loaded machine with "Failed to connect to GCS". The GCS held stopped for 8 s as it
+    starts: the head still comes up."""
+    import threading
+    from clnn_ros.reproduce.cluster import LocalHead
+    head, outcome = LocalHead(1), []
+
+    def start() -> None:
+        try:
+            head.__enter__()
+            outcome.append("started")
+        except Exception as error:
+            outcome.append(str(error))
+    starting = threading.Thread(target=start)
+    starting.start()
+    gcs, deadline = None, time.monotonic() + HANG_S
+    while gcs is None and starting.is_alive() and time.monotonic() < deadline:
+        ours = head_processes(head.temp_dir) if head.temp_dir else {}
+        # once the raylet runs, `ray start` asks the GCS for the node: then the GCS stops
+        if "raylet" in ours and "gcs_server" in ours:
+            gcs = ours["gcs_server"]
+            os.kill(gcs, signal.SIGSTOP)
+        time.sleep(0.005)
+    try:
+        assert gcs is not None, outcome
+        time.sleep(8.0)
+    finally:
+        if gcs is not None:
+            with contextlib.suppress(ProcessLookupError):  # a head that failed is torn down
+                os.kill(gcs, signal.SIGCONT)
+        starting.join(HANG_S)
+        head.__exit__(None, None, None)
+    assert outcome == ["started"]
 
 
 @pytest.mark.parametrize("ray_args, status, message", [

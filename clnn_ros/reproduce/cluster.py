@@ -45,8 +45,12 @@ STOP_S = 30.0  # for a local head's processes to end once it is told to stop
 WAIT_S = 1.0  # the driver waits for results in slices this long, so that Ctrl-C is seen at once
 WORKER_THREADS = 1  # numba threads per worker: a worker per CPU
 LOOPBACK_ENVIRON = {"RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0"}  # this node's address: 127.0.0.1
-LOCAL_ENVIRON = {**LOOPBACK_ENVIRON, "RAY_AUTH_MODE": "token",
-                 "RAY_USAGE_STATS_ENABLED": "0"}  # a local head's, and its drivers' (+ the token)
+# A local head's, and its drivers' (+ the token). Ray's clients give a GCS 5 s to answer
+# (gcs_rpc_server_connect_timeout_s): a new head's GCS on a loaded machine can take longer, and
+# `ray start` then ended a suite run with "Failed to connect to GCS". Slow, not a fault: 60 s,
+# within START_S.
+LOCAL_ENVIRON = {**LOOPBACK_ENVIRON, "RAY_AUTH_MODE": "token", "RAY_USAGE_STATS_ENABLED": "0",
+                 "RAY_gcs_rpc_server_connect_timeout_s": "60"}
 # The head's agents get fixed ports: with port 0 the raylet waits for them to write their port in
 # a file, and ends the node when that takes over 15 s, as on a loaded machine (ray#65983).
 AGENT_PORTS = ("--dashboard-agent-grpc-port", "--dashboard-agent-listen-port",
