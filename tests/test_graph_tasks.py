@@ -48,7 +48,8 @@ def test_a_gymnasium_task_in_the_graph_equals_the_core(ros_env, tmp_path, task_n
                      str(tmp_path), *(["--composed"] if composed else []))
     assert result.returncode == 0, result.stderr
     actions = next((o.split("=")[1] for o in options if o.startswith("--actions=")), None)
-    changes = dict(o.split("=", 1) for o, before in zip(options[1:], options) if before == "--option")
+    changes = dict(o.split("=", 1) for o, before in zip(options[1:], options)
+                   if before == "--option")
     task, env = make(task_name, actions)
     core = run_task_episode(seed, task_params(task, {"trials": str(trials),
                                                      "max_steps": str(max_steps), **changes}),

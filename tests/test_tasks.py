@@ -98,8 +98,9 @@ def test_the_shaped_mapping_signals_the_sign_of_the_rewards_since_the_last_signa
 @pytest.mark.parametrize("changes, message", [
     ({"success_counter": "carry"}, "reward_mapping shaped sums each trial's own rewards: "
                                    "success_counter must be per_trial"),
-    ({"task": "cartpole", "n_actions": 2}, "reward_mapping shaped reads a task's rewards, and "
-                                           "the cart-pole's are 1 on every step: use failure")])
+    ({"task": "cartpole", "n_actions": 2},
+     "reward_mapping shaped reads a task's rewards, and the cart-pole's are the same on every "
+     "step: use failure")])
 def test_the_shaped_mapping_is_refused_where_it_cannot_read_a_trials_rewards(changes, message):
     with pytest.raises(ParamError) as error:
         Params(**{"task": "gymnasium:LunarLander-v3", "n_actions": 4,

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field, fields
 
 PHYSICS = ("paper", "correct", "integration_slip", "gymnasium")
 PROTOCOLS = ("paper", "gymnasium")
-# What the rule's reward and punishment mean for a task (core.rln.outcome): "failure", the
+# What the rule's reward and punishment mean for a task (core.rln.task_outcome): "failure", the
 # paper's, for a task whose episode terminates in failure (a reward every sigma successful
 # steps, a punishment when it terminates); "goal", for one whose episode terminates in success
 # (reaching a goal: a reward when it terminates, a punishment every omega steps without it);
@@ -175,7 +175,7 @@ class Params:
                              "success_counter must be per_trial")
         if self.reward_mapping == "shaped" and self.task == CARTPOLE:
             raise ParamError("reward_mapping shaped reads a task's rewards, and the cart-pole's "
-                             "are 1 on every step: use failure")
+                             "are the same on every step: use failure")
         if not isinstance(self.task, str) or not self.task.strip():
             raise ParamError(f"task must be a task's name, e.g. {CARTPOLE!r}, got {self.task!r}")
         if isinstance(self.n_actions, bool) or not isinstance(self.n_actions, int) \
