@@ -16,6 +16,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -265,7 +266,6 @@ def test_a_local_head_whose_gcs_answers_late_still_starts():
     gives up after 5 s by default (gcs_rpc_server_connect_timeout_s), which ended a suite run on
     a loaded machine with "Failed to connect to GCS". The GCS held stopped for 8 s as it
     starts: the head still comes up."""
-    import threading
     from clnn_ros.reproduce.cluster import LocalHead
     head, outcome = LocalHead(1), []
 

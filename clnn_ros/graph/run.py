@@ -154,9 +154,9 @@ DESCRIPTIONS = {
                   (2, MAX_ACTIONS)),
     "reward_mapping": ("failure: a reward every sigma successful steps, a punishment when the "
                        "episode terminates (the paper's); goal: a reward when it terminates (a "
-                       "goal reached), a punishment every omega steps without it; shaped: the sign of the "
-                       "task's rewards summed since the last signal, every sigma steps and when "
-                       "the episode terminates", REWARD_MAPPINGS),
+                       "goal reached), a punishment every omega steps without it; shaped: the "
+                       "sign of the task's rewards summed since the last signal, every sigma "
+                       "steps and when the episode terminates", REWARD_MAPPINGS),
     "variable_edges": ("encoder: another task's variables and their interior edges, "
                        "name:e1,e2;name2:e1 ('' for the cart-pole)", None),
     "seed": ("the episode's seed: initial weights, initial angles", (0, 2**32 - 1)),

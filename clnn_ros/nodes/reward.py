@@ -3,7 +3,8 @@ reward R by the run's reward_mapping: the paper's ("failure"), [0,1] punishment 
 terminated, [1,0] a positive reward every sigma successful steps, [0,0] otherwise; "goal" (a task
 that terminates at its goal), a reward when it terminates, a punishment every omega steps
 without it; "shaped" (a task whose rewards say how well it goes), the sign of the observations'
-rewards summed since the last signal, every sigma steps and when a step terminates. It also tells the agent when the trial is over (terminated or truncated).
+rewards summed since the last signal, every sigma steps and when a step terminates. It also
+tells the agent when the trial is over (terminated or truncated).
 
     python -m clnn_ros.nodes.reward --ros-args -p sigma:=256
 
