@@ -7,6 +7,7 @@ one line, the bag is finalized, and nothing is left running."""
 from __future__ import annotations
 
 import csv
+import json
 import os
 import signal
 import subprocess
@@ -286,6 +287,10 @@ def test_a_second_graph_on_the_same_domain_and_namespace_is_refused(ros_env, tmp
         assert len(lines) == 1 and lines[0].startswith(
             "run_all: error: another graph runs in namespace / on ROS domain"), second.stderr
         assert not (tmp_path / "second" / "bag").exists()  # it held the other's messages
+        # what run_all goes by if it has to end a trial manager hung after its results: this
+        # one sent no EPISODE_END, so its recorder is told to stop (not left to wait for one)
+        summary = json.loads((tmp_path / "second" / "summary.json").read_text())
+        assert (summary["exit_status"], summary["ticks"]) == (names.NOT_STARTED, 0)
         assert first.poll() is None  # the first run goes on
     finally:
         os.killpg(first.pid, signal.SIGINT)

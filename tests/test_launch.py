@@ -148,7 +148,8 @@ def test_the_episode_ends_the_launch_with_exit_0_and_its_results(launch_env, tmp
     out = tmp_path / "out"
     launched = Launched(launch_env, tmp_path, "trials:=2", f"out:={out}")
     assert launched.end(120.0) == 0, launched.output()
-    assert json.loads((out / "summary.json").read_text())["exit_reason"] == "completed"
+    summary = json.loads((out / "summary.json").read_text())
+    assert (summary["exit_reason"], summary["exit_status"]) == ("completed", 0)
     assert len((out / "trials.csv").read_text().splitlines()) == 1 + 2
     assert (out / "bag" / "metadata.yaml").is_file()
     assert not launched.having(SUPERVISION) and not launched.having("process has died"), \

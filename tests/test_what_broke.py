@@ -28,7 +28,7 @@ from clnn_ros import bag
 from clnn_ros.session import rosenv
 from clnn_ros.core.episode import run_episode
 from clnn_ros.core.params import Params
-from clnn_ros.graph.names import PER_TICK, STATE
+from clnn_ros.graph.names import NOT_STARTED, PER_TICK, STATE
 from clnn_ros.graph.run import RUN_SETTINGS
 from clnn_ros.graph.ticks import TICKS_RECORD, TickRanges
 from clnn_ros.graph.watch import (claim_order, describe_foreign, foreign_publishers,
@@ -531,6 +531,9 @@ def test_of_two_graphs_the_later_gives_way_however_late_they_meet(ros_env, tmp_p
     assert problem_lines(stderr) == [
         f"run_all: error: another graph runs in namespace / on ROS domain {domain}: its trial "
         f"manager started first (give each graph its own --namespace or ROS_DOMAIN_ID)"], stderr
+    # it sent no EPISODE_END: what run_all goes by if it must end this trial manager (hung in
+    # DDS on its way out) and tell the recorder to finish
+    assert json.loads((tmp_path / "summary.json").read_text())["exit_status"] == NOT_STARTED
     assert not (tmp_path / "bag").exists()
     assert not processes_with(str(tmp_path))
 

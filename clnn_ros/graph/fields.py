@@ -52,10 +52,12 @@ def trials_csv(rows) -> str:
     return text.getvalue()
 
 
-def summary_json(seed: int, steps: list[int], ticks: int, wall_s: float, exit_reason: str) -> str:
-    """summary.json's text, as the trial manager writes it and run_all reads it."""
+def summary_json(seed: int, steps: list[int], ticks: int, wall_s: float, exit_reason: str,
+                 exit_status: int) -> str:
+    """summary.json's text, as the trial manager writes it and run_all reads it: `exit_status`
+    is the status the trial manager exits with (run_all's, if it has to end the process)."""
     return json.dumps({"seed": seed, "trials": len(steps),
                        "mean_steps": float(np.mean(steps)) if steps else None,
                        "ticks": ticks, "wall_s": wall_s,
                        "ticks_per_s": ticks / wall_s if wall_s else None,
-                       "exit_reason": exit_reason}, indent=2)
+                       "exit_reason": exit_reason, "exit_status": exit_status}, indent=2)

@@ -23,7 +23,7 @@ class TrialFiles:
         return self._save(lambda: self._write_trials(results))
 
     def results(self, results: list, final_weights, ticks: int, wall_s: float,
-                exit_reason: str) -> str | None:
+                exit_reason: str, exit_status: int) -> str | None:
         def write() -> None:
             self._write_trials(results)
             if final_weights is not None:
@@ -32,7 +32,7 @@ class TrialFiles:
                         np.save(f, final_weights)
                 write_atomically(self.out / "final_weights.npy", save_weights)
             write_text_atomically(self.out / "summary.json", summary_json(
-                self.seed, [r[2] for r in results], ticks, wall_s, exit_reason))
+                self.seed, [r[2] for r in results], ticks, wall_s, exit_reason, exit_status))
         return self._save(write)
 
     def _write_trials(self, results: list) -> None:

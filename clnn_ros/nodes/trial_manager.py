@@ -364,7 +364,7 @@ class TrialManagerNode(Node):
     def interrupted(self) -> None:
         """Ctrl-C: keep what the run did so far."""
         self.exit_reason = "interrupted"
-        self.save_results(self.join.tick)
+        self.save_results(self.join.tick, 0)  # a requested stop: run_node exits with 0
 
     def stop(self, exit_code: int, reason: str, tick: int | None = None) -> None:
         """End the episode: tell the nodes (not when it gives way: the other graph's would obey
@@ -379,17 +379,18 @@ class TrialManagerNode(Node):
                 seed=self.settings["seed"],
                 successful_steps=self.results[-1][2] if self.results else 0))
         self.exit_reason = reason
-        if (problem := self.save_results(tick)) and not exit_code:
+        if (problem := self.save_results(tick, exit_code)) and not exit_code:
             exit_code, reason = 1, problem
             self.exit_reason = reason
         if exit_code:
             self.get_logger().error(reason)
         self.finished.set_result(exit_code)
 
-    def save_results(self, tick: int) -> str | None:
+    def save_results(self, tick: int, exit_status: int) -> str | None:
         wall = time.monotonic() - self.started_at if self.started_at else 0.0
         return self.files.results(self.results, self.final_weights,
-                                  tick + 1 if self.started_at else 0, wall, self.exit_reason)
+                                  tick + 1 if self.started_at else 0, wall, self.exit_reason,
+                                  exit_status)
 
 
 def main() -> None:

@@ -27,7 +27,6 @@ from collections import deque
 from pathlib import Path
 from typing import Callable
 
-from ..graph.fields import COMPLETED
 from ..graph.names import GRAPH_NODES, RECORDER, TRIAL_MANAGER
 from ..graph.run import node_arguments, write_params
 from ..session.process_signals import EXIT_WITH_STDIN, SHOW_STACKS
@@ -319,7 +318,9 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
             # it holds, with the GIL held, so no signal handler runs): nothing is lost by
             # ending it now.
             warn_forced(supervisor.stop([TRIAL_MANAGER], 0.0, interrupt=False))
-            status = 0 if outcome.get("exit_reason") == COMPLETED else 1
+            # the status it would have exited with: NOT_STARTED (another graph) sent no
+            # EPISODE_END, so the recorder must then be told to finish
+            status = outcome["exit_status"]
             break
         time.sleep(0.02)
     if status is None and manager.returncode is not None and manager.returncode < 0:
