@@ -176,54 +176,59 @@ def main(argv=None) -> int:
     if args.raster and args.field:
         parser.error("--raster prints whole SpikeVectors: not with --field")
     import rclpy  # after the arguments: --help and a usage error need no ROS
-    from ..session.rclpy_session import qos_profile, ros_session
+    from ..session.rclpy_session import exit_keeping_participant, ros_session
     with ros_session() as received:
         node = rclpy.create_node("echo", start_parameter_services=False, enable_rosout=False)
-        try:
-            type_name = topic_type(node, args.topic, args.wait)
-            cls = message_class(type_name)
-            if args.raster and type_name != TOPIC_TYPES[SPIKES]:
-                raise EchoError(f"--raster needs a SpikeVector topic such as /rln/spikes, not "
-                                f"{args.topic} ({type_name})")
-            if args.field:
-                get_field(cls(), args.field, indexed=False)  # the names, before any message
-            printed = []
-            raster = Raster(sys.stdout) if args.raster else None
+        exit_keeping_participant(node, echo(node, args, received))
 
-            def show(msg) -> None:
-                if args.once and printed:
-                    return
-                if raster is not None:
-                    raster(msg)
-                else:
-                    value = get_field(msg, args.field) if args.field else msg
-                    sys.stdout.write(to_csv(value) + "\n" if args.csv else
-                                     to_yaml(value, args.flow_style) + "---\n")
-                sys.stdout.flush()
-                printed.append(1)
 
-            resolved = node.resolve_topic_name(args.topic)
-            latched = graph_topic(resolved) in LATCHED  # published once: ask for the last
-            node.create_subscription(cls, args.topic, show,
-                                     qos_profile(qos.LABELS if latched else qos.ECHO))
-            if raster is not None and graph_topic(resolved) == SPIKES:
-                node.create_subscription(message_class(TOPIC_TYPES[INPUT_LABELS]),
-                                         resolved.removesuffix(SPIKES) + INPUT_LABELS,
-                                         raster.set_labels, qos_profile(qos.LABELS))
-            while not received and not (args.once and printed):
-                rclpy.spin_once(node, timeout_sec=0.1)
-            return 128 + received[0] if received else 0
-        except EchoError as error:
-            print(f"echo: error: {error}", file=sys.stderr)
-            return 1
-        except BrokenPipeError:  # `| head`
-            sys.stderr.close()
-            return 0
-        except (ImportError, AttributeError, ValueError) as error:
-            print(f"echo: error: cannot load the type of {args.topic}: {error}", file=sys.stderr)
-            return 1
-        finally:
-            node.destroy_node()
+def echo(node, args, received: list[int]) -> int:
+    """Print the topic's messages as asked; returns the exit status."""
+    import rclpy
+    from ..session.rclpy_session import qos_profile
+    try:
+        type_name = topic_type(node, args.topic, args.wait)
+        cls = message_class(type_name)
+        if args.raster and type_name != TOPIC_TYPES[SPIKES]:
+            raise EchoError(f"--raster needs a SpikeVector topic such as /rln/spikes, not "
+                            f"{args.topic} ({type_name})")
+        if args.field:
+            get_field(cls(), args.field, indexed=False)  # the names, before any message
+        printed = []
+        raster = Raster(sys.stdout) if args.raster else None
+
+        def show(msg) -> None:
+            if args.once and printed:
+                return
+            if raster is not None:
+                raster(msg)
+            else:
+                value = get_field(msg, args.field) if args.field else msg
+                sys.stdout.write(to_csv(value) + "\n" if args.csv else
+                                 to_yaml(value, args.flow_style) + "---\n")
+            sys.stdout.flush()
+            printed.append(1)
+
+        resolved = node.resolve_topic_name(args.topic)
+        latched = graph_topic(resolved) in LATCHED  # published once: ask for the last
+        node.create_subscription(cls, args.topic, show,
+                                 qos_profile(qos.LABELS if latched else qos.ECHO))
+        if raster is not None and graph_topic(resolved) == SPIKES:
+            node.create_subscription(message_class(TOPIC_TYPES[INPUT_LABELS]),
+                                     resolved.removesuffix(SPIKES) + INPUT_LABELS,
+                                     raster.set_labels, qos_profile(qos.LABELS))
+        while not received and not (args.once and printed):
+            rclpy.spin_once(node, timeout_sec=0.1)
+        return 128 + received[0] if received else 0
+    except EchoError as error:
+        print(f"echo: error: {error}", file=sys.stderr)
+        return 1
+    except BrokenPipeError:  # `| head`
+        sys.stderr.close()
+        return 0
+    except (ImportError, AttributeError, ValueError) as error:
+        print(f"echo: error: cannot load the type of {args.topic}: {error}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

@@ -20,7 +20,7 @@ import rclpy
 from std_srvs.srv import Trigger
 
 from ..cli import OneLineArgumentParser
-from ..session.rclpy_session import ros_session
+from ..session.rclpy_session import exit_keeping_participant, ros_session
 
 
 def main(argv=None) -> int:
@@ -36,26 +36,28 @@ def main(argv=None) -> int:
     with ros_session() as received:
         node = rclpy.create_node("save_checkpoint", start_parameter_services=False,
                                  enable_rosout=False)
-        try:
-            client = node.create_client(Trigger, service)
-            deadline = time.monotonic() + args.wait
-            future = None
-            while not received and time.monotonic() < deadline:
-                if future is None and client.service_is_ready():
-                    future = client.call_async(Trigger.Request())
-                rclpy.spin_once(node, timeout_sec=0.05)
-                if future is not None and future.done():
-                    response = future.result()
-                    print(response.message, file=sys.stdout if response.success else sys.stderr)
-                    return 0 if response.success else 1
-            if received:
-                return 128 + received[0]
-            print(f"save_checkpoint: error: no agent answered on {service} within "
-                  f"{args.wait:g} s (is the graph running on this ROS_DOMAIN_ID?)",
-                  file=sys.stderr)
-            return 2
-        finally:
-            node.destroy_node()
+        exit_keeping_participant(node, request_checkpoint(node, service, args.wait, received))
+
+
+def request_checkpoint(node, service: str, wait_s: float, received: list[int]) -> int:
+    """Ask the agent to save a checkpoint; returns the exit status."""
+    client = node.create_client(Trigger, service)
+    deadline = time.monotonic() + wait_s
+    future = None
+    while not received and time.monotonic() < deadline:
+        if future is None and client.service_is_ready():
+            future = client.call_async(Trigger.Request())
+        rclpy.spin_once(node, timeout_sec=0.05)
+        if future is not None and future.done():
+            response = future.result()
+            print(response.message, file=sys.stdout if response.success else sys.stderr)
+            return 0 if response.success else 1
+    if received:
+        return 128 + received[0]
+    print(f"save_checkpoint: error: no agent answered on {service} within "
+          f"{wait_s:g} s (is the graph running on this ROS_DOMAIN_ID?)",
+          file=sys.stderr)
+    return 2
 
 
 if __name__ == "__main__":

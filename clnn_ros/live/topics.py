@@ -84,34 +84,37 @@ def main(argv=None) -> int:
                         help="also the plumbing (names with a part starting with _)")
     args = parser.parse_args(argv)
     import rclpy  # after the arguments: --help and a usage error need no ROS
-    from rclpy.topic_or_service_is_hidden import topic_or_service_is_hidden
-    from ..session.rclpy_session import ros_session
+    from ..session.rclpy_session import exit_keeping_participant, ros_session
     with ros_session() as received:
         # hidden (ROS's convention) and this process's own: its endpoints are left out
         node = rclpy.create_node(f"_topics_{os.getpid()}", start_parameter_services=False,
                                  enable_rosout=False)
-        try:
-            view, settled = discover(node, args.wait, received)
-            if received:
-                return 128 + received[0]
-            if not settled:
-                print(f"topics: warning: discovery had not settled after {args.wait:g} s "
-                      f"(--wait): the list may be incomplete" if view else
-                      f"topics: no other participant found in {args.wait:g} s on this "
-                      f"ROS_DOMAIN_ID", file=sys.stderr)
-            for name, (types, publishers, subscribers) in sorted(view.items()):
-                if not args.include_hidden_topics and topic_or_service_is_hidden(name):
-                    continue
-                line = f"{name} [{', '.join(types)}]"
-                if args.count:
-                    line += f"  publishers {len(publishers)}, subscribers {len(subscribers)}"
-                print(line)
-            return 0
-        except BrokenPipeError:
-            sys.stderr.close()
-            return 0
-        finally:
-            node.destroy_node()
+        exit_keeping_participant(node, list_topics(node, args, received))
+
+
+def list_topics(node, args, received: list[int]) -> int:
+    """Print the topics found; returns the exit status."""
+    from rclpy.topic_or_service_is_hidden import topic_or_service_is_hidden
+    try:
+        view, settled = discover(node, args.wait, received)
+        if received:
+            return 128 + received[0]
+        if not settled:
+            print(f"topics: warning: discovery had not settled after {args.wait:g} s "
+                  f"(--wait): the list may be incomplete" if view else
+                  f"topics: no other participant found in {args.wait:g} s on this "
+                  f"ROS_DOMAIN_ID", file=sys.stderr)
+        for name, (types, publishers, subscribers) in sorted(view.items()):
+            if not args.include_hidden_topics and topic_or_service_is_hidden(name):
+                continue
+            line = f"{name} [{', '.join(types)}]"
+            if args.count:
+                line += f"  publishers {len(publishers)}, subscribers {len(subscribers)}"
+            print(line)
+        return 0
+    except BrokenPipeError:
+        sys.stderr.close()
+        return 0
 
 
 if __name__ == "__main__":

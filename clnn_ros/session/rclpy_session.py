@@ -9,7 +9,7 @@ import os
 import sys
 import time
 from contextlib import contextmanager
-from typing import Callable, Iterator
+from typing import Callable, Iterator, NoReturn
 
 from . import rosenv  # loopback DDS discovery by default, before rclpy loads
 
@@ -83,6 +83,24 @@ def init_ros(argv: list[str]) -> None:
         return
     print(f"{prog}: error: {message}", file=sys.stderr)
     raise SystemExit(2)
+
+
+def exit_keeping_participant(node: Node, status: int) -> NoReturn:
+    """A live tool's end once its output is out: its subscriptions and clients are deleted (its
+    peers unmatch them at once: no publisher waits for its acknowledgements), its DDS
+    participant is not (Fast DDS 2.14 can deadlock deleting one while a peer's endpoint goes
+    away, with Python's lock held: seen in echo beside CPU hogs; docs/ROS_GRAPH.md), and the
+    process exits with `status`. Its peers forget the participant when its lease ends."""
+    for subscription in list(node.subscriptions):
+        node.destroy_subscription(subscription)
+    for client in list(node.clients):
+        node.destroy_client(client)
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (BrokenPipeError, ValueError):  # `| head`; a stream already closed
+            pass
+    os._exit(status)
 
 
 def split_ros_arguments(argv: list[str]) -> tuple[list[str], list[str]]:
