@@ -32,8 +32,8 @@ def test_a_compiled_step_is_gymnasiums_bit_for_bit(name):
     task, _ = make(f"gymnasium:{name}")
     env = gymnasium.make(name)
     engine = compiled.CompiledTask(task, env)
-    given = [a.value if engine.code == compiled.INVERTED_PENDULUM else int(a.value)
-             for a in task.actions]
+    mujoco = engine.code in compiled.MUJOCO
+    given = [a.value if mujoco else int(a.value) for a in task.actions]
     actions = np.random.default_rng(1)
     values, terminations = np.empty(env.observation_space.shape[0]), 0
     for trajectory in range(30):
@@ -46,12 +46,12 @@ def test_a_compiled_step_is_gymnasiums_bit_for_bit(name):
             action = int(actions.integers(len(given)))
             observation, reward, terminated, truncated, _ = env.step(
                 np.array([given[action]], dtype=env.action_space.dtype)
-                if engine.code == compiled.INVERTED_PENDULUM else given[action])
+                if mujoco else given[action])
             assert compiled.step(engine.code, state, engine.sim, engine.forces,
                                  action) == (reward, terminated)
             compiled.observe(engine.code, state, engine.sim, values)
             assert values.tolist() == observation.tolist()
-            if engine.code == compiled.INVERTED_PENDULUM:  # MuJoCo's data, not only what it shows
+            if mujoco:  # MuJoCo's data, not only what it shows
                 assert engine.sim[2].tolist() == env.unwrapped.data.qpos.tolist()
                 assert engine.sim[3].tolist() == env.unwrapped.data.qvel.tolist()
             else:
@@ -75,6 +75,8 @@ def test_a_compiled_step_is_gymnasiums_bit_for_bit(name):
                                   "segments": "2"}),
     ("gymnasium:InvertedPendulum-v5", {}),
     ("gymnasium:InvertedPendulum-v5", {"actions": "-1,0.3,1", "tie_break": "random"}),
+    ("gymnasium:InvertedDoublePendulum-v5", {}),
+    ("gymnasium:InvertedDoublePendulum-v5", {"reward_mapping": "shaped", "sigma": "4"}),
 ])
 def test_the_task_batch_engine_is_the_cores_episode_bit_for_bit(name, changes):
     actions = changes.get("actions")  # a Box action space's declared values (float32 there)

@@ -34,7 +34,7 @@ _libm_pow = types.ExternalFunction("clnn_ros_libm_pow",
 
 
 @numba.njit(cache=True)
-def _square(x):
+def square(x):
     """x ** 2 as NumPy computes it for a float64 scalar (libm's pow)."""
     return _libm_pow(x, 2.0)
 
@@ -56,12 +56,12 @@ def _acrobot_derivatives(s0, s1, s2, s3, a):
     d1 = m1 * lc1 ** 2 + m2 * (l1 ** 2 + lc2 ** 2 + 2 * l1 * lc2 * math.cos(theta2)) + I1 + I2
     d2 = m2 * (lc2 ** 2 + l1 * lc2 * math.cos(theta2)) + I2
     phi2 = m2 * lc2 * g * math.cos(theta1 + theta2 - _PI / 2.0)
-    phi1 = (-m2 * l1 * lc2 * _square(dtheta2) * math.sin(theta2)
+    phi1 = (-m2 * l1 * lc2 * square(dtheta2) * math.sin(theta2)
             - 2 * m2 * l1 * lc2 * dtheta2 * dtheta1 * math.sin(theta2)
             + (m1 * lc1 + m2 * l1) * g * math.cos(theta1 - _PI / 2)
             + phi2)
-    ddtheta2 = ((a + d2 / d1 * phi1 - m2 * l1 * lc2 * _square(dtheta1) * math.sin(theta2) - phi2)
-                / (m2 * lc2 ** 2 + I2 - _square(d2) / d1))
+    ddtheta2 = ((a + d2 / d1 * phi1 - m2 * l1 * lc2 * square(dtheta1) * math.sin(theta2) - phi2)
+                / (m2 * lc2 ** 2 + I2 - square(d2) / d1))
     ddtheta1 = -(d2 * ddtheta2 + phi1) / d1
     return dtheta1, dtheta2, ddtheta1, ddtheta2
 
