@@ -194,3 +194,24 @@ def test_the_encoding_capacity_finds_acrobots_policy_and_refuses_a_bad_table(tmp
     error = capsys.readouterr().err
     assert error.startswith("encoding_capacity: error: --start 7: a table is 2 actions")
     assert error.count("\n") == 1
+
+
+def test_the_linear_controller_probe_holds_the_pendulum_and_refuses_a_task_without_mujoco(
+        tmp_path, capsys):
+    """InvertedPendulum-v5: LQR from the finite-difference model holds all 1,000 steps, also
+    quantized to the forces -1 and +1; a task without MuJoCo is one line and exit 2."""
+    probe = load_script("linear_controller_probe")
+    out = tmp_path / "linear.csv"
+    assert probe.main(["gymnasium:InvertedPendulum-v5", "--levels=-1,1", "--seeds", "128-129",
+                       "--csv", str(out)]) == 0
+    with open(out) as f:
+        rows = list(csv.DictReader(f))
+    assert [(r["forces"], float(r["mean_steps"])) for r in rows] == [("", 1000.0),
+                                                                      ("-1 1", 1000.0)]
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit_:
+        probe.main(["gymnasium:Acrobot-v1"])
+    error = capsys.readouterr().err
+    assert exit_.value.code == 2 and error.count("\n") == 1
+    assert error.startswith("linear_controller_probe: error: gymnasium:Acrobot-v1 is not a "
+                            "MuJoCo task with one actuator")
