@@ -156,20 +156,25 @@ def main(argv=None) -> int:
 
 
 def learned(best: tuple, p, task, env, seeds, radix: list[int], offsets: np.ndarray) -> dict:
-    """The rule on the encoding: does it keep the best table (learning from its weights, with a
-    segment per pattern at least), and does it find it (`p` as it is, from each seed's own
-    weights: the table it ends with)?"""
+    """The rule on the encoding: from the best table's weights (a segment per pattern at least)
+    and, the control, from the reversed table's (every action mirrored: a table written at
+    w_max is out of the rule's reach in these episodes if that one stays as bad), and does it
+    find the best table (`p` as it is, from each seed's own weights: the table it ends with)?"""
     wide = p.replace(segments=max(p.n_segments, len(best)))
-    from_best = [run_compiled_task_episode(
-        seed, wide, task, env, weights=table_weights(best, radix, offsets, p.n_actions,
-                                                     p.n_inputs, p.w_max, wide.n_segments)
-    ).returns[-100:].mean() for seed in seeds]
+
+    def from_table(table: tuple) -> float:
+        return round(float(np.mean([run_compiled_task_episode(
+            seed, wide, task, env, weights=table_weights(table, radix, offsets, p.n_actions,
+                                                         p.n_inputs, p.w_max, wide.n_segments)
+        ).returns[-100:].mean() for seed in seeds])), 1)
     own = [run_compiled_task_episode(seed, p, task, env) for seed in seeds]
     unlike = [sum(a != b for a, b in zip(played_table(r.final_weights, radix, offsets,
                                                       Rule.from_params(p)), best))
               for r in own]
     return {"learning episodes": p.trials, "learning seeds": len(seeds),
-            "from the best table: last 100": round(float(np.mean(from_best)), 1),
+            "from the best table: last 100": from_table(best),
+            "from the reversed table: last 100": from_table(
+                tuple(p.n_actions - 1 - action for action in best)),
             "from the seeds' weights: last 100": round(float(np.mean(
                 [r.returns[-100:].mean() for r in own])), 1),
             "patterns unlike the best table's (median)": float(np.median(unlike))}

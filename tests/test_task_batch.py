@@ -189,6 +189,8 @@ def test_the_encoding_capacity_finds_acrobots_policy_and_refuses_a_bad_table(tmp
     assert row["search"] == "every table" and row["best table"] == "20"
     assert float(row["best mean return"]) >= -100 > float(row["one change away: best"])
     assert row["from the best table: last 100"] != "" and row["learning seeds"] == "2"
+    # the control: the reversed table, written as strongly, is as far out of the rule's reach
+    assert float(row["from the reversed table: last 100"]) < -100
     capsys.readouterr()
     assert capacity.main([*argv[:5], "--start", "7"]) == 2
     error = capsys.readouterr().err

@@ -387,9 +387,8 @@ class TrialManagerNode(Node):
         self.finished.set_result(exit_code)
 
     def save_results(self, tick: int, exit_status: int) -> str | None:
-        wall = time.monotonic() - self.started_at if self.started_at else 0.0
-        return self.files.results(self.results, self.final_weights,
-                                  tick + 1 if self.started_at else 0, wall, self.exit_reason,
+        ran = (tick + 1, time.monotonic() - self.started_at) if self.started_at else (0, 0.0)
+        return self.files.results(self.results, self.final_weights, *ran, self.exit_reason,
                                   exit_status)
 
 

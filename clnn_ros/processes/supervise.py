@@ -318,8 +318,7 @@ def run_separate(supervisor: Supervisor, values: dict, workdir: Path,
             # it holds, with the GIL held, so no signal handler runs): nothing is lost by
             # ending it now.
             warn_forced(supervisor.stop([TRIAL_MANAGER], 0.0, interrupt=False))
-            # the status it would have exited with: NOT_STARTED (another graph) sent no
-            # EPISODE_END, so the recorder must then be told to finish
+            # its own status: NOT_STARTED sent no EPISODE_END (the recorder is told to finish)
             status = outcome["exit_status"]
             break
         time.sleep(0.02)
