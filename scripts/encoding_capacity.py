@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from clnn_ros.core.encoder import Encoder
+from clnn_ros.core.episode import seed_setup
 from clnn_ros.core.params import ParamError
 from clnn_ros.core.presets import preset_values
 from clnn_ros.core.rln import infer, response_space
@@ -75,6 +76,10 @@ def main(argv=None) -> int:
                         help="also learn this long with the rule (the preset's values) from "
                              "each seed's own weights, and from the best table's (a segment per "
                              "pattern at least), on --learn-seeds")
+    parser.add_argument("--margin", type=float, default=None,
+                        help="--learn from a table written as this much above each seed's own "
+                             "initial weights (on its pattern's segment) instead of at w_max: "
+                             "within the rule's reach")
     parser.add_argument("--preset", default=None, help="the rule's values for --learn")
     parser.add_argument("--learn-seeds", default="128-135")
     parser.add_argument("--csv", type=Path, default=None)
@@ -143,7 +148,8 @@ def main(argv=None) -> int:
            "one change away: median": round(float(np.median(neighbours)), 1),
            "one change away: best": round(max(neighbours), 1)}
     if args.learn:
-        row.update(learned(best[1], learning, task, env, learn_seeds, radix, offsets))
+        row.update(learned(best[1], learning, task, env, learn_seeds, radix, offsets,
+                           args.margin))
     print(", ".join(f"{k}: {v}" for k, v in row.items()))
     if args.csv is not None:
         new = not args.csv.exists()
@@ -155,23 +161,32 @@ def main(argv=None) -> int:
     return 0
 
 
-def learned(best: tuple, p, task, env, seeds, radix: list[int], offsets: np.ndarray) -> dict:
+def learned(best: tuple, p, task, env, seeds, radix: list[int], offsets: np.ndarray,
+            margin: float | None = None) -> dict:
     """The rule on the encoding: from the best table's weights (a segment per pattern at least)
     and, the control, from the reversed table's (every action mirrored: a table written at
-    w_max is out of the rule's reach in these episodes if that one stays as bad), and does it
-    find the best table (`p` as it is, from each seed's own weights: the table it ends with)?"""
+    w_max is out of the rule's reach in these episodes if that one stays as bad; `margin`
+    writes both as that much above each seed's own initial weights instead), and does it find
+    the best table (`p` as it is, from each seed's own weights: the table it ends with)?"""
     wide = p.replace(segments=max(p.n_segments, len(best)))
+
+    def weights(table: tuple, seed: int) -> np.ndarray:
+        if margin is None:
+            return table_weights(table, radix, offsets, p.n_actions, p.n_inputs, p.w_max,
+                                 wide.n_segments)
+        return seed_setup(seed, wide)[0] + margin * table_weights(
+            table, radix, offsets, p.n_actions, p.n_inputs, 1.0, wide.n_segments)
 
     def from_table(table: tuple) -> float:
         return round(float(np.mean([run_compiled_task_episode(
-            seed, wide, task, env, weights=table_weights(table, radix, offsets, p.n_actions,
-                                                         p.n_inputs, p.w_max, wide.n_segments)
-        ).returns[-100:].mean() for seed in seeds])), 1)
+            seed, wide, task, env, weights=weights(table, seed)).returns[-100:].mean()
+            for seed in seeds])), 1)
     own = [run_compiled_task_episode(seed, p, task, env) for seed in seeds]
     unlike = [sum(a != b for a, b in zip(played_table(r.final_weights, radix, offsets,
                                                       Rule.from_params(p)), best))
               for r in own]
     return {"learning episodes": p.trials, "learning seeds": len(seeds),
+            "table written": "at w_max" if margin is None else f"+{margin:g} on the seed's",
             "from the best table: last 100": from_table(best),
             "from the reversed table: last 100": from_table(
                 tuple(p.n_actions - 1 - action for action in best)),

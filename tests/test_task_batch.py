@@ -191,6 +191,13 @@ def test_the_encoding_capacity_finds_acrobots_policy_and_refuses_a_bad_table(tmp
     assert row["from the best table: last 100"] != "" and row["learning seeds"] == "2"
     # the control: the reversed table, written as strongly, is as far out of the rule's reach
     assert float(row["from the reversed table: last 100"]) < -100
+    # written a little above the seed's own weights instead, the rule corrects it
+    assert capacity.main([*argv[:-6], "--learn", "150", "--learn-seeds", "128-129", "--margin",
+                          "0.05", "--csv", str(tmp_path / "margin.csv")]) == 0
+    with open(tmp_path / "margin.csv") as f:
+        row = next(csv.DictReader(f))
+    assert row["table written"] == "+0.05 on the seed's"
+    assert float(row["from the reversed table: last 100"]) >= -100
     capsys.readouterr()
     assert capacity.main([*argv[:5], "--start", "7"]) == 2
     error = capsys.readouterr().err
