@@ -69,7 +69,8 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", default="200,201",
                         help="the starts' seeds (selection seeds: 128-255)")
     parser.add_argument("--episodes", type=int, default=10, help="per seed and table")
-    parser.add_argument("--restarts", type=int, default=3, help="hill climbing's random starts")
+    parser.add_argument("--restarts", type=int, default=3,
+                        help="hill climbing's starts (the first: --start's table where given)")
     parser.add_argument("--start", default="", help="hill climbing's first start: a table, an "
                         "action per pattern in mixed-radix order, e.g. 0022 (else random)")
     parser.add_argument("--learn", type=int, default=0, metavar="EPISODES",
@@ -100,6 +101,9 @@ def main(argv=None) -> int:
         offsets, n_inputs = encoder.arrays[2], encoder.n_inputs
         radix = [int(b - a) for a, b in zip(offsets, [*offsets[1:], n_inputs])]
         n_patterns, n_actions = int(np.prod(radix)), len(task.actions)
+        if args.restarts < 1:
+            raise ParamError(f"--restarts {args.restarts}: hill climbing needs 1 start at least "
+                             f"(the first is --start's table where given)")
         if args.start and (len(args.start) != n_patterns or
                            any(a not in "0123456789"[:n_actions] for a in args.start)):
             raise ParamError(f"--start {args.start}: a table is {n_patterns} actions "

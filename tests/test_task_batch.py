@@ -203,6 +203,8 @@ def test_the_encoding_capacity_finds_acrobots_policy_and_refuses_a_bad_table(tmp
     error = capsys.readouterr().err
     assert error.startswith("encoding_capacity: error: --start 7: a table is 2 actions")
     assert error.count("\n") == 1
+    assert capacity.main([*argv[:5], "--restarts", "0"]) == 2
+    assert capsys.readouterr().err.startswith("encoding_capacity: error: --restarts 0: hill")
 
 
 def test_the_linear_controller_probe_holds_the_pendulum_and_refuses_a_task_without_mujoco(
