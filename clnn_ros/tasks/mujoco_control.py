@@ -78,13 +78,19 @@ def begin(handles, qpos, qvel, start):
 
 
 @numba.njit(cache=True)
+def _advance(handles, ctrl, force, frame_skip):
+    """MujocoEnv.do_simulation: the control set, frame_skip MuJoCo steps, mj_rnePostConstraint."""
+    ctrl[0] = force
+    for _ in range(frame_skip):
+        _mj_step(handles[0], handles[1])
+    _mj_rne_post_constraint(handles[0], handles[1])
+
+
+@numba.njit(cache=True)
 def inverted_pendulum_step(handles, ctrl, qpos, qvel, force):
     """InvertedPendulumEnv.step with the control `force` (as the float32 action gives it):
     (reward, terminated)."""
-    ctrl[0] = force
-    for _ in range(FRAME_SKIP):
-        _mj_step(handles[0], handles[1])
-    _mj_rne_post_constraint(handles[0], handles[1])
+    _advance(handles, ctrl, force, FRAME_SKIP)
     finite = (math.isfinite(qpos[0]) and math.isfinite(qpos[1]) and math.isfinite(qvel[0])
               and math.isfinite(qvel[1]))
     terminated = not finite or abs(qpos[1]) > MAX_ANGLE
@@ -102,10 +108,7 @@ def observe(qpos, qvel, out):
 def inverted_double_pendulum_step(handles, ctrl, qvel, site_xpos, force):
     """InvertedDoublePendulumEnv.step with the control `force`: (reward, terminated), the tip's
     site (site_xpos[0]) giving the distance penalty and the termination."""
-    ctrl[0] = force
-    for _ in range(DOUBLE_FRAME_SKIP):
-        _mj_step(handles[0], handles[1])
-    _mj_rne_post_constraint(handles[0], handles[1])
+    _advance(handles, ctrl, force, DOUBLE_FRAME_SKIP)
     x, y = site_xpos[0], site_xpos[2]
     terminated = y <= MIN_TIP_HEIGHT
     square = classic_control.square  # x ** 2 as NumPy computes it for a float64 scalar
