@@ -33,6 +33,7 @@ from clnn_ros.core.params import ParamError
 from clnn_ros.core.presets import preset_values
 from clnn_ros.core.rln import infer, response_space
 from clnn_ros.core.rule import Rule
+from clnn_ros.reproduce.common import parse_seeds
 from clnn_ros.task_batch import compiles, run_compiled_task_episode
 from clnn_ros.tasks.gymnasium_task import make, task_params
 
@@ -91,8 +92,7 @@ def main(argv=None) -> int:
             raise ParamError(f"{args.task}: its step is not compiled (clnn_ros.tasks.compiled)")
         p = task_params(task, {"state_vars": args.state_vars, "variable_edges": args.edges})
         seeds = [int(s) for s in args.seeds.split(",")]
-        first, _, last = args.learn_seeds.partition("-")
-        learn_seeds = range(int(first), int(last or first) + 1)
+        learn_seeds = parse_seeds(args.learn_seeds)
         learning = task_params(task, {**(preset_values(args.preset) if args.preset else {}),
                                       "state_vars": args.state_vars,
                                       "variable_edges": args.edges,

@@ -21,6 +21,7 @@ import mujoco
 import numpy as np
 
 from clnn_ros.cli import OneLineArgumentParser
+from clnn_ros.reproduce.common import parse_seeds
 from clnn_ros.tasks.gymnasium_task import env_id
 
 RICCATI_ITERATIONS = 20_000
@@ -88,8 +89,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     try:
         env = gymnasium.make(env_id(args.task))
-        first, _, last = args.seeds.partition("-")
-        seeds = list(range(int(first), int(last or first) + 1))
+        seeds = parse_seeds(args.seeds)
         level_sets = [np.array([float(v) for v in text.split(",")]) for text in args.levels]
     except (gymnasium.error.Error, ValueError) as error:
         parser.error(str(error))
@@ -97,13 +97,13 @@ def main(argv=None) -> int:
         parser.error(f"{args.task} is not a MuJoCo task with one actuator")
     low, high = float(env.action_space.low[0]), float(env.action_space.high[0])
     gain = lqr_gain(*linearized(env))[0]
-    rows = [("linear (continuous, clipped)", "",
-             *play(env, lambda x: float(np.clip(-gain @ x, low, high)), seeds))]
+
+    def linear(x: np.ndarray) -> float:
+        return float(np.clip(-gain @ x, low, high))
+    rows = [("linear (continuous, clipped)", "", *play(env, linear, seeds))]
     for levels in level_sets:
         rows.append(("linear, nearest force", " ".join(f"{v:g}" for v in levels), *play(
-            env, lambda x, lv=levels: float(lv[np.argmin(abs(lv - np.clip(-gain @ x, low,
-                                                                                  high)))]),
-            seeds)))
+            env, lambda x, lv=levels: float(lv[np.argmin(abs(lv - linear(x)))]), seeds)))
     print(f"{args.task}: LQR gain over qpos, qvel: {np.round(gain, 3).tolist()}; "
           f"{len(seeds)} episodes each, threshold {env.spec.reward_threshold}")
     for policy, levels, mean_return, mean_steps in rows:
